@@ -1,0 +1,26 @@
+# Two commands do all the set-up: `make run` (the default experiment) and `make test`.
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+# The CPU build of torch: from the local wheel store when the machine has one, else PyTorch's CPU index.
+TORCH_FROM := $(if $(wildcard /opt/wheels/torch-2.13.0+cpu*),--find-links /opt/wheels,--index-url https://download.pytorch.org/whl/cpu)
+
+.PHONY: run test bench clean
+run: $(VENV)/.installed
+	$(PY) train/run.py $(ARGS)
+
+test: $(VENV)/.installed
+	$(PY) -m pytest
+
+bench: $(VENV)/.installed
+	$(PY) -m pip install -q minisom
+	for b in benches/*.py; do $(PY) $$b || exit 1; done
+
+$(VENV)/.installed: pyproject.toml
+	test -x $(PY) || python3 -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	$(PY) -m pip install -q $(TORCH_FROM) "torch==2.13.0+cpu"
+	$(PY) -m pip install -q -e ".[dev]"
+	touch $@
+
+clean:
+	rm -rf $(VENV)
