@@ -8,7 +8,8 @@ evidence seen so far, under a fixed precedence, never the most recent:
 
     clean Growth  >  Elimination  >  ambiguous Growth  >  Uncertainty  >  nothing
 
-- clean Growth: this property alone changed and the outcome changed. That is an intervention on one variable with an
+- clean Growth: this property alone changed (besides properties already known to be irrelevant) and the outcome
+  changed. That is an intervention on one variable with an
   effect, the strongest causal evidence there is: the property is *dominant*, and no later null result overturns it.
 - Elimination: the property changed and the outcome did not: *irrelevant*. It overrides an ambiguous Growth, which
   is how a property judged dominant on confounded evidence ends irrelevant.
@@ -102,7 +103,11 @@ class CausalRules(nn.Module):
         # nothing new (the contradiction is explained elsewhere).
         fired[~dp & dc & undecided] = UNCERTAINTY
 
-        clean = (fired == GROWTH) & (dp.sum(-1, keepdim=True) == 1)
+        # clean: the only change among properties not already known to be irrelevant (a known-irrelevant change
+        # does not confound), or the only change at all (then the earlier Elimination was wrong)
+        suspects = dp & (self.state != IRRELEVANT)
+        n_suspects = suspects.sum(-1, keepdim=True)
+        clean = (fired == GROWTH) & ((suspects & (n_suspects == 1)) | ((n_suspects == 0) & (dp.sum(-1, keepdim=True) == 1)))
         proven = self.proven
         new = self.state.clone()
         # Precedence: clean Growth > Elimination > ambiguous Growth > Uncertainty > unknown.

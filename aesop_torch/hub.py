@@ -1,0 +1,286 @@
+"""Layer 2: the object hub (with W, maps -> hub, and W', hub -> maps), the action and body hubs, the reward code.
+
+Every hub's output is one 50-neuron row of the episodic memory sheet (20 rows x 50).
+
+Object hub. The paper: "if the net activity due to a neuron i and a neuron j winning in the maps manages to
+activate a neuron k in the object hub, set W_ik = 1 and W_jk = 1" - binary, one-shot. Here an object is an
+ASSEMBLY of `assembly_size` hub neurons (a sparse 5-of-50 code): the memory recalls reliably from sparse rows, and
+one neuron per object would give only 50 codes with no graded overlap. Storing an object sets W = 1 from each map's
+winner to each assembly neuron. W' (hub -> maps) is W transposed; the paper's "connection strength between the
+object hub and the map" is `strength`, one number per agent and map, gating both directions; the learning rules
+edit it in place.
+
+All state has a leading batch dim B: B independent agents (e.g. one per presentation order) share one tensor
+program.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import torch
+from torch import nn
+
+N_NEURONS = 50  # one row of the episodic memory sheet
+
+
+@dataclass
+class HubConfig:
+    n_neurons: int = N_NEURONS
+    # 5-of-50: sparse enough that two objects' assemblies rarely overlap (least-used allocation gives 10 disjoint
+    # assemblies before any neuron is reused), dense enough for a reliable memory cue.
+    assembly_size: int = 5
+    # the memory holds ~230 episodes, so an agent never needs more distinct objects than that
+    max_assemblies: int = 230
+    # `match` above this: the object is already known. The same object seen again scores 1 (relative activity) or
+    # a little less (a remeasurement a hair off), one of four equally weighted properties changed scores <= 0.75
+    # (a bit more if the new value is close to the old one); 0.85 sits between.
+    match_threshold: float = 0.85
+    # the map that holds names, for `cross_modal`
+    word_map: str = "word"
+    # bottom_up reads each map's activity relative to its peak (divisive normalisation): the map's winner drives
+    # its hub neurons fully however closely the input matches its codebook vector (a remeasured colour activates
+    # its unit anywhere from 0.6 to 1.0, see encoders), the graded activity sets how much every other unit drives.
+    # So a stored object shown again gives exactly 1 on its assembly. False: raw activities, as given.
+    relative_activity: bool = True
+
+
+class ObjectHub(nn.Module):
+    """The object hub of B agents over P maps (properties and the word map), U_max = the largest map's units.
+
+    buffers: W (B, P, U_max, N) binary, strength (B, P) pathway gates (init 1), usage (B, N) assemblies per neuron,
+    assemblies (B, max_assemblies, N) bool the stored assemblies, n_assemblies (B,).
+    """
+
+    def __init__(self, maps: dict[str, int], config: HubConfig | None = None, batch: int = 1):
+        super().__init__()
+        self.config = c = config or HubConfig()
+        if not maps or any(int(n) < 1 for n in maps.values()):
+            raise ValueError(f"maps must name at least one map, each with >= 1 unit, got {maps}")
+        if not 1 <= c.assembly_size <= c.n_neurons:
+            raise ValueError(f"assembly_size must be in 1..{c.n_neurons}, got {c.assembly_size}")
+        if batch < 1:
+            raise ValueError(f"batch must be >= 1, got {batch}")
+        self.names = tuple(maps)
+        P, U, N = len(maps), max(maps.values()), c.n_neurons
+        self.register_buffer("sizes", torch.tensor([int(n) for n in maps.values()]), persistent=False)
+        self.register_buffer("W", torch.zeros(batch, P, U, N))
+        self.register_buffer("strength", torch.ones(batch, P))
+        self.register_buffer("usage", torch.zeros(batch, N, dtype=torch.long))
+        self.register_buffer("assemblies", torch.zeros(batch, c.max_assemblies, N, dtype=torch.bool))
+        self.register_buffer("n_assemblies", torch.zeros(batch, dtype=torch.long))
+
+    @property
+    def W_back(self) -> torch.Tensor:
+        """W' (B, P, N, U_max): hub -> maps, the transpose of W."""
+        return self.W.transpose(-1, -2)
+
+    def index(self, name: str) -> int:
+        if name not in self.names:
+            raise ValueError(f"unknown map '{name}' (known: {', '.join(self.names)})")
+        return self.names.index(name)
+
+    def _check(self, acts: torch.Tensor, present: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        B, P, U, _ = self.W.shape
+        if acts.shape != (B, P, U):
+            raise ValueError(f"acts must be (B, P, U_max) = {(B, P, U)}, got {tuple(acts.shape)}")
+        if present.shape != (B, P):
+            raise ValueError(f"present must be (B, P) = {(B, P)}, got {tuple(present.shape)}")
+        return acts.to(self.W.dtype), present.bool()
+
+    # -- activity flows -----------------------------------------------------------------------------------------
+    def bottom_up(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+        """Maps -> hub. acts (B, P, U_max) graded map activities, present (B, P) maps with input -> (B, N) in [0, 1].
+
+        u_k = sum_m s_m min(1, (a_m W_m)_k) / sum_m s_m, over present maps with a pathway to k (some W_m[:, k] = 1),
+        with a_m relative to its peak (see HubConfig.relative_activity). A stored object shown again gives 1 on its
+        assembly; with four equal strengths, one property changed gives 0.75. A map with strength 0 drops out of
+        both sums: it neither helps nor hurts. (The min(1, .) keeps a neuron shared by two assemblies from being
+        driven twice by one map.)
+        """
+        acts, present = self._check(acts, present)
+        if self.config.relative_activity:
+            acts = acts / acts.amax(-1, keepdim=True).clamp_min(1e-12)
+        drive = torch.einsum("bpu,bpuk->bpk", acts, self.W).clamp(max=1.0)       # (B, P, N)
+        gate = self.strength[:, :, None] * present[:, :, None] * (self.W.amax(2) > 0)  # (B, P, N)
+        den = gate.sum(1)
+        return torch.where(den > 0, (gate * drive).sum(1) / den.clamp_min(1e-12), torch.zeros_like(den))
+
+    def top_down(self, hub_state: torch.Tensor) -> torch.Tensor:
+        """Hub -> maps (retro-activation). hub_state (B, N) -> (B, P, U_max): r_m = s_m (hub_state W'_m) / size.
+
+        A full stored assembly gives s_m on the units it was stored with, in every map (1.0 at full strength)."""
+        B, P, U, N = self.W.shape
+        if hub_state.shape != (B, N):
+            raise ValueError(f"hub_state must be (B, N) = {(B, N)}, got {tuple(hub_state.shape)}")
+        r = torch.einsum("bk,bpuk->bpu", hub_state.to(self.W.dtype), self.W) / self.config.assembly_size
+        return self.strength[:, :, None] * r
+
+    def cross_modal(self, word_acts: torch.Tensor) -> torch.Tensor:
+        """Word map -> hub -> every map. word_acts (B, U_word) or (B, U_max) -> (B, P, U_max) retro-activation.
+
+        "blue cylinder" activates the word map, the hub's assemblies stored with that name light up, and they
+        retro-activate what a blue cylinder looks like in the colour and shape maps (and the rest of the object)."""
+        B, P, U, _ = self.W.shape
+        w = self.index(self.config.word_map)
+        if word_acts.ndim != 2 or word_acts.shape[0] != B or word_acts.shape[1] > U:
+            raise ValueError(f"word_acts must be (B, <= {U}) with B = {B}, got {tuple(word_acts.shape)}")
+        acts = self.W.new_zeros(B, P, U)
+        acts[:, w, :word_acts.shape[1]] = word_acts.to(acts.dtype)
+        present = torch.zeros(B, P, dtype=torch.bool, device=acts.device)
+        present[:, w] = True
+        return self.top_down(self.bottom_up(acts, present))
+
+    def code(self, hub_state: torch.Tensor) -> torch.Tensor:
+        """(B, N) activity -> (B, N) bool: the assembly_size most active neurons (k-winners-take-all), ties to the
+        lower index; neurons with no activity never win, so a silent hub gives an empty code."""
+        k = self.config.assembly_size
+        order = torch.sort(hub_state, dim=-1, descending=True, stable=True).indices[:, :k]
+        out = torch.zeros_like(hub_state, dtype=torch.bool)
+        out.scatter_(1, order, True)
+        return out & (hub_state > 0)
+
+    # -- objects ------------------------------------------------------------------------------------------------
+    def assembly_activity(self, hub_state: torch.Tensor) -> torch.Tensor:
+        """(B, N) -> (B, max_assemblies): mean activity over each stored assembly's neurons (0 for empty slots)."""
+        a = self.assemblies.to(hub_state.dtype)
+        return torch.einsum("bn,ban->ba", hub_state, a) / self.config.assembly_size
+
+    def match(self, acts: torch.Tensor, present: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """The stored object most like the input: (its assembly's mean activity (B,), its assembly (B, N) bool).
+        An agent with no stored object gets (0, empty assembly)."""
+        score = self.assembly_activity(self.bottom_up(acts, present))
+        best, i = score.max(-1)
+        assembly = self.assemblies[torch.arange(score.shape[0], device=i.device), i]
+        return best, assembly
+
+    @torch.no_grad()
+    def allocate(self, winners: torch.Tensor, present: torch.Tensor, mask: torch.Tensor,
+                 generator: torch.Generator) -> torch.Tensor:
+        """One-shot storage of a new object for the agents in mask (B,). winners (B, P) long map winners,
+        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by
+        the generator), sets W[b, m, winner_m, k] = 1 for every present map m and assembly neuron k.
+        Returns the new assemblies (B, N) bool (empty where mask is False)."""
+        B, P, U, N = self.W.shape
+        if winners.shape != (B, P) or present.shape != (B, P) or mask.shape != (B,):
+            raise ValueError(f"winners and present must be (B, P) = {(B, P)} and mask (B,) = ({B},), got "
+                             f"{tuple(winners.shape)}, {tuple(present.shape)}, {tuple(mask.shape)}")
+        present, mask = present.bool(), mask.bool()
+        active = present & mask[:, None]
+        if (active & ((winners < 0) | (winners >= self.sizes))).any():
+            raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
+        if (mask & (self.n_assemblies >= self.config.max_assemblies)).any():
+            raise ValueError(f"object hub full: {self.config.max_assemblies} assemblies stored")
+        # random tie-break in [0, 0.5): never reorders neurons of different usage; drawn for every agent so the
+        # generator advances the same way whatever the mask
+        jitter = torch.rand(B, N, generator=generator).to(self.W.device) * 0.5
+        pick = (self.usage.to(self.W.dtype) + jitter).topk(self.config.assembly_size, dim=-1, largest=False).indices
+        assembly = torch.zeros(B, N, dtype=torch.bool, device=self.W.device)
+        assembly.scatter_(1, pick, True)
+        assembly &= mask[:, None]
+        b, m = active.nonzero(as_tuple=True)
+        self.W[b, m, winners[b, m]] = torch.maximum(self.W[b, m, winners[b, m]], assembly[b].to(self.W.dtype))
+        self.usage += assembly.long()
+        slot = self.n_assemblies.clamp(max=self.config.max_assemblies - 1)
+        rows = torch.arange(B, device=self.W.device)[mask]
+        self.assemblies[rows, slot[mask]] = assembly[mask]
+        self.n_assemblies += mask.long()
+        return assembly
+
+
+class _TwoHotNames:
+    """Named states as 2-hot rows: state i -> neurons 2i and 2i+1. Disjoint codes, decodable, the memory's row
+    sparsity (2 active of 50)."""
+
+    names: tuple = ()
+
+    def __init__(self, n_neurons: int = N_NEURONS):
+        if 2 * len(self.names) > n_neurons:
+            raise ValueError(f"{len(self.names)} names need {2 * len(self.names)} neurons, only {n_neurons}")
+        self.n_neurons = n_neurons
+
+    def encode(self, names) -> torch.Tensor:
+        """A name -> (N,) bool; a list of B names -> (B, N) bool."""
+        single = isinstance(names, str)
+        names = [names] if single else list(names)
+        out = torch.zeros(len(names), self.n_neurons, dtype=torch.bool)
+        for b, n in enumerate(names):
+            if n not in self.names:
+                raise ValueError(f"unknown {type(self).__name__} name '{n}' (known: {', '.join(self.names)})")
+            i = self.names.index(n)
+            out[b, 2 * i:2 * i + 2] = True
+        return out[0] if single else out
+
+    def decode(self, rows: torch.Tensor):
+        """(N,) -> name or None; (B, N) -> list of names (None where the row is not exactly one name's code).
+        Float rows count a neuron as active above 0.5."""
+        rows = torch.as_tensor(rows)
+        if rows.shape[-1] != self.n_neurons or rows.ndim not in (1, 2):
+            raise ValueError(f"rows must be (N,) or (B, N) with N = {self.n_neurons}, got {tuple(rows.shape)}")
+        single = rows.ndim == 1
+        on = (rows > 0.5).reshape(-1, self.n_neurons)
+        codes = self.encode(list(self.names))                       # (S, N)
+        hit = (on[:, None, :] == codes[None]).all(-1)                # (B, S)
+        out = [self.names[int(h.nonzero()[0])] if h.any() else None for h in hit]
+        return out[0] if single else out
+
+
+class ActionHub(_TwoHotNames):
+    """Abstract action goals ("what can be done with an object"), the paper's canonical-neuron-like hub."""
+    names = ("reach", "grasp", "lift", "carry", "drop", "release")
+
+
+class BodyHub(_TwoHotNames):
+    """States of the body."""
+    names = ("goal_unreachable", "goal_reached", "holding", "hand_free")
+
+
+@dataclass
+class RewardConfig:
+    # 1250 cm^3 raises the water of the default 12 cm jar by 11 cm (from 14 to 25 of its 30 cm): more than any
+    # object that fits through its mouth displaces; larger volumes are clamped
+    max_cm3: float = 1250.0
+    # 25 coarse x 25 fine units: 625 levels, a 2 cm^3 step, finer than the water level can be read (~11 cm^3)
+    coarse: int = 25
+    fine: int = 25
+
+
+class RewardCode:
+    """A displaced volume as a 2-hot memory row: one of `coarse` units plus one of `fine` units.
+
+    value = (coarse_index * fine + fine_index) * step, step = max_cm3 / (coarse * fine) = 2 cm^3. Encoding rounds
+    to the nearest step, halves up (365 cm^3 -> 366), and clamps to 0..(coarse * fine - 1) * step (1248 cm^3).
+    """
+
+    def __init__(self, config: RewardConfig | None = None, n_neurons: int = N_NEURONS):
+        self.config = c = config or RewardConfig()
+        if c.coarse + c.fine > n_neurons:
+            raise ValueError(f"coarse + fine = {c.coarse + c.fine} units do not fit in {n_neurons} neurons")
+        self.n_neurons = n_neurons
+        self.step = c.max_cm3 / (c.coarse * c.fine)
+
+    def encode(self, cm3) -> torch.Tensor:
+        """(...) volumes in cm^3 -> (..., N) bool 2-hot rows."""
+        c = self.config
+        v = torch.as_tensor(cm3, dtype=torch.float64)
+        if not torch.isfinite(v).all():
+            raise ValueError("reward volumes must be finite")
+        q = torch.floor(v / self.step + 0.5).clamp(0, c.coarse * c.fine - 1).long()
+        out = torch.zeros(*v.shape, self.n_neurons, dtype=torch.bool)
+        out.scatter_(-1, (q // c.fine)[..., None], True)
+        out.scatter_(-1, (c.coarse + q % c.fine)[..., None], True)
+        return out
+
+    def decode(self, rows: torch.Tensor) -> torch.Tensor:
+        """(..., N) rows (bool or float, active above 0.5) -> (...) cm^3, NaN where the row is not exactly one
+        coarse and one fine unit (and nothing else)."""
+        c = self.config
+        rows = torch.as_tensor(rows)
+        if rows.ndim == 0 or rows.shape[-1] != self.n_neurons:
+            raise ValueError(f"rows must have last dimension {self.n_neurons}, got shape {tuple(rows.shape)}")
+        on = rows > 0.5
+        coarse, fine, rest = on[..., :c.coarse], on[..., c.coarse:c.coarse + c.fine], on[..., c.coarse + c.fine:]
+        valid = (coarse.sum(-1) == 1) & (fine.sum(-1) == 1) & ~rest.any(-1)
+        value = (coarse.long().argmax(-1) * c.fine + fine.long().argmax(-1)).float() * self.step
+        return torch.where(valid, value, torch.full_like(value, math.nan))
