@@ -157,10 +157,10 @@ class ObjectHub(nn.Module):
 
     @torch.no_grad()
     def allocate(self, winners: torch.Tensor, present: torch.Tensor, mask: torch.Tensor,
-                 generator: torch.Generator) -> torch.Tensor:
+                 generator: torch.Generator | None = None) -> torch.Tensor:
         """One-shot storage of a new object for the agents in mask (B,). winners (B, P) long map winners,
-        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by
-        the generator), sets W[b, m, winner_m, k] = 1 for every present map m and assembly neuron k.
+        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by an optional
+        generator, else to the lower index), sets W[b, m, winner_m, k] = 1 for every present map m and assembly neuron k.
         Returns the new assemblies (B, N) bool (empty where mask is False)."""
         B, P, U, N = self.W.shape
         if winners.shape != (B, P) or present.shape != (B, P) or mask.shape != (B,):
@@ -172,9 +172,13 @@ class ObjectHub(nn.Module):
             raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
         if (mask & (self.n_assemblies >= self.config.max_assemblies)).any():
             raise ValueError(f"object hub full: {self.config.max_assemblies} assemblies stored")
-        # random tie-break in [0, 0.5): never reorders neurons of different usage; drawn for every agent so the
-        # generator advances the same way whatever the mask
-        jitter = torch.rand(B, N, generator=generator).to(self.W.device) * 0.5
+        # tie-break in [0, 0.5): never reorders neurons of different usage. Random with a generator (drawn for every
+        # agent, so it advances the same way whatever the mask); without one, the lower index wins, which keeps an
+        # agent's choice independent of the other agents in its batch.
+        if generator is None:
+            jitter = torch.arange(N, device=self.W.device).expand(B, N) * (0.5 / N)
+        else:
+            jitter = torch.rand(B, N, generator=generator).to(self.W.device) * 0.5
         pick = (self.usage.to(self.W.dtype) + jitter).topk(self.config.assembly_size, dim=-1, largest=False).indices
         assembly = torch.zeros(B, N, dtype=torch.bool, device=self.W.device)
         assembly.scatter_(1, pick, True)
