@@ -1,0 +1,306 @@
+"""Episodic memory: an excitatory-inhibitory auto-associative network of 20 x 50 neurons (the paper's sheet).
+
+Each row of the sheet is one event of an episode (object hub, action hub, body hub or reward activity) and the
+whole sheet is one episode. Encoding is one-shot; a partial cue (the object hub activity of what is in view)
+recalls the whole episode, and several episodes can be recalled for one cue, each with a strength.
+
+The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not available here); this one is our choice:
+
+- Weights: the covariance rule over the stored episodes, J = sum_mu (xi_mu - p)(xi_mu - p)^T with a zero diagonal,
+  where p is each neuron's mean activity over the stored episodes (Hebbian outer products minus the outer product
+  of the running mean; both are updated one-shot by each new episode). The nominal-sparsity rule (p = k_r / 50)
+  fails on the agent's episodes, which share most rows (the same reach, grasp and drop codes every time): the
+  shared rows then pull every recall towards the majority episode. With the actual mean, a row every episode
+  shares carries no weight (it is predicted by p alone) and a row no episode uses stays silent (p = 0, no weight).
+- Prediction: each neuron estimates its own activity from the others, a_i = p_i + sum_j J_ij d_j / sum_{j!=i} d_j^2
+  with d = s - p (p is the neuron's excitability, the division a global divisive inhibition). For a stored
+  episode as the state, a = xi exactly when the stored deviations are orthogonal.
+- Inhibition: each row has its own inhibitory pool, a k-winners-take-all: at most k_r neurons of row r fire, and
+  only those predicted above `threshold`, so a row with no support stays empty.
+- Recall: the object row is clamped to the graded cue while the other rows (unknown at first: d = 0) complete the
+  pattern, then it is released and the whole sheet runs freely to a fixed point, so the object row becomes a stored
+  binary code rather than the graded cue. Strength = cue . xi_obj / |xi_obj|, the mean cue activity on the recalled
+  object code. After each retrieval the retrieved state is transiently depressed (anti-Hebbian: its outer product
+  and its share of the mean are taken out for the rest of this recall, i.e. a retrieved stored episode is as if
+  not stored) and retrieval restarts from the same cue, until the strength drops below `min_strength`, the state
+  is not a fixed point, nothing is left, or `max_recalls` episodes were recalled. Results: strongest first.
+
+Nothing dense is stored: J is a sum of outer products, so J d = X^T (X d) - S (S . d) / n - diag(J) d is computed
+from the stored patterns X (B, max_episodes, 20, 50) bool, their sum S and count n. `weights(b)` and
+`mean_activity(b)` give the dense network of one agent for inspection and tests.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import torch
+from torch import nn
+
+# Divisive normalisation floor: sum_j d_j^2 of any real state is >= ~1 (a 5-neuron cue alone gives ~4.5), so 1e-3
+# only guards against 0/0 and keeps float32 rounding in h (~1e-5) from being amplified.
+_EPS = 1e-3
+
+
+def _default_row_k() -> tuple[int, ...]:
+    # object row (index 1): a 5-neuron hub assembly; every other row: an exact 2-of-50 event code
+    return tuple(5 if r == 1 else 2 for r in range(20))
+
+
+@dataclass
+class MemoryConfig:
+    rows: int = 20                  # paper: 20 events per episode
+    cols: int = 50                  # paper: 50 neurons per event (= one hub)
+    object_row: int = 1             # the agent's sheet: row 0 body state before acting, row 1 the object hub
+    # active neurons per row (the row's k-WTA): 5 on the object row (hub assembly), 2 elsewhere. Sparse rows give
+    # the covariance rule its capacity; 5 on the cue row give the cue enough signal to pull the episode out.
+    row_k: tuple = field(default_factory=_default_row_k)
+    # buffer size per agent: the paper's ~230 episodes in 1000 neurons. Measured (benches/memory_capacity.py):
+    # >= 99 % exact recall of random episodes up to 275, so the paper's 230 is kept, with a margin. (At 230 the
+    # buffer is 230 kB per agent: a run of many agents that stores a few episodes each should lower it.)
+    max_episodes: int = 230
+    # clamped (pattern completion) and free (object row released) iterations; each cue stops at its own fixed
+    # point. At 230 random episodes completion settles in ~5 clamped steps (exact recall is the same with a cap of
+    # 4, 8 or 12), a cue still moving after 8 goes on in the free phase; free running ends in ~2 steps.
+    cue_steps: int = 8
+    free_steps: int = 12
+    # a neuron fires only if the others predict its activity above this (and it wins its row). 1/2 would be "more
+    # likely on than off"; a little lower lets rows with partial support join the completion early (300 random
+    # episodes, 3 seeds: 98.2 / 98.0 / 97.7 % exact at 0.3 / 0.4 / 0.5; agent-like episodes are indifferent).
+    threshold: float = 0.4
+    # an overlap below this is a chance coincidence, not a memory of the cue: one shared neuron of two 5-neuron
+    # assemblies at full activity gives 1/5 = 0.2, while an object sharing one property in four with a stored one
+    # (hub activity 0.25) is still recalled.
+    min_strength: float = 0.22
+    # most episodes recalled for one cue: the experiment encodes at most its 8 training objects.
+    max_recalls: int = 8
+    # agents recalled together (each with its own memory): 256 keeps the (256, 1000) working tensors in cache,
+    # measured 1.5x faster than all 4096 agents at once; and a bound on the float copy of their patterns
+    # (elements per chunk): 2^25 floats = 128 MB however many episodes they hold.
+    chunk_agents: int = 256
+    chunk_elements: int = 1 << 25
+
+    def __post_init__(self):
+        self.row_k = tuple(int(k) for k in self.row_k)
+        if len(self.row_k) != self.rows:
+            raise ValueError(f"MemoryConfig.row_k has {len(self.row_k)} entries, expected rows={self.rows}")
+        if not all(1 <= k < self.cols for k in self.row_k):
+            raise ValueError(f"MemoryConfig.row_k must lie in [1, cols={self.cols}), got {self.row_k}")
+        if not 0 <= self.object_row < self.rows:
+            raise ValueError(f"MemoryConfig.object_row={self.object_row} is outside 0..{self.rows - 1}")
+        if min(self.max_episodes, self.max_recalls, self.cue_steps, self.free_steps) < 1:
+            raise ValueError("MemoryConfig.max_episodes, max_recalls, cue_steps and free_steps must be >= 1")
+
+
+class Recall(NamedTuple):
+    """What one cue brought back, strongest first; K = max_recalls."""
+    episodes: torch.Tensor  # (B, K, rows, cols) bool, zeros where not valid
+    strength: torch.Tensor  # (B, K) float in [0, 1]: mean cue activity on the recalled object code, 0 where not valid
+    valid: torch.Tensor     # (B, K) bool
+    any: torch.Tensor       # (B,) bool: at least one episode recalled
+
+
+def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float) -> torch.Tensor:
+    """Per-row inhibition: (..., R, C) predicted activity -> bool state, the k_r largest of row r firing if above
+    threshold. Exact ties go to the lower neuron index, so the result never depends on the batch."""
+    kth = a.topk(int(row_k.max()), dim=-1).values.gather(-1, (row_k - 1).expand(*a.shape[:-2], -1)[..., None])
+    above, tied = a > kth, a == kth
+    room = row_k[:, None] - above.sum(-1, keepdim=True)    # places left for neurons tied with the k-th
+    return (above | (tied & (tied.cumsum(-1) <= room))) & (a > threshold)
+
+
+class _Net(NamedTuple):
+    """The factorised network seen by a batch of cues: patterns x (1 or B, M, N) float 0/1 (shared or per cue),
+    and per cue the sum of the patterns still in play (B, N), their number (B, 1) and the depressed states (B, r, N)."""
+    x: torch.Tensor
+    total: torch.Tensor
+    n: torch.Tensor
+    z: torch.Tensor
+
+    def take(self, i: torch.Tensor) -> "_Net":
+        return _Net(self.x if self.x.shape[0] == 1 else self.x[i], self.total[i], self.n[i], self.z[i])
+
+    def mean(self) -> torch.Tensor:
+        return self.total / self.n.clamp(min=1)
+
+    def predict(self, d: torch.Tensor) -> torch.Tensor:
+        """a = p + J d / sum_{j != i} d_j^2 for deviations d (B, N) from the mean, J of the patterns in play."""
+        x, S, n, z = self
+        p = S / n.clamp(min=1)
+        if x.shape[0] == 1 and d.shape[0] != 1:   # many cues against one memory: two plain matrix products
+            h = (d @ x[0].T) @ x[0]
+        else:
+            h = torch.bmm(torch.bmm(x, d[:, :, None]).transpose(1, 2), x)[:, 0]
+        if z.shape[1]:   # a few depressed states per cue: elementwise beats tiny batched products
+            h = h - ((z * d[:, None]).sum(-1, keepdim=True) * z).sum(1)
+        # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
+        h = h - S * ((p * d).sum(1, keepdim=True) + (1 - p) * d)
+        norm = (d * d).sum(1, keepdim=True) - d * d   # leave-one-out: neuron i's own state is no evidence
+        return p + h / norm.clamp(min=_EPS)
+
+
+class EpisodicMemory(nn.Module):
+    """B independent episodic memories (leading batch dim), one-shot store and multi-episode recall."""
+
+    def __init__(self, config: MemoryConfig | None = None, batch: int = 1):
+        super().__init__()
+        self.config = c = config or MemoryConfig()
+        self.batch = batch
+        self.register_buffer("patterns", torch.zeros(batch, c.max_episodes, c.rows, c.cols, dtype=torch.bool))
+        self.register_buffer("count", torch.zeros(batch, dtype=torch.long))
+        self.register_buffer("row_k", torch.tensor(c.row_k, dtype=torch.long), persistent=False)
+
+    # -- encoding ---------------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def store(self, episode: torch.Tensor, mask: torch.Tensor | None = None) -> None:
+        """One-shot encoding of episode (B, rows, cols) bool for the agents where mask (B,) is True (default all).
+
+        Raises RuntimeError, storing nothing, when a masked agent's memory is full: nothing is ever overwritten."""
+        c, B = self.config, self.batch
+        if tuple(episode.shape) != (B, c.rows, c.cols):
+            raise ValueError(f"episode shape {tuple(episode.shape)}, expected ({B}, {c.rows}, {c.cols})")
+        if episode.dtype != torch.bool:
+            if ((episode != 0) & (episode != 1)).any():
+                raise ValueError("episode must be binary (bool or 0/1)")
+            episode = episode != 0
+        mask = torch.ones(B, dtype=torch.bool) if mask is None else mask.to(torch.bool)
+        if tuple(mask.shape) != (B,):
+            raise ValueError(f"mask shape {tuple(mask.shape)}, expected ({B},)")
+        episode, mask = episode.to(self.patterns.device), mask.to(self.patterns.device)
+        n = episode.sum(-1)  # (B, rows)
+        bad = mask[:, None] & (n != 0) & (n != self.row_k)
+        if bad.any():
+            b, r = bad.nonzero()[0].tolist()
+            raise ValueError(f"episode of agent {b}: row {r} has {int(n[b, r])} active neurons, "
+                             f"expected 0 or {int(self.row_k[r])}")
+        if (mask & (n[:, c.object_row] == 0)).any():
+            raise ValueError(f"episode has an empty object row {c.object_row}: it could never be cued")
+        full = mask & (self.count >= c.max_episodes)
+        if full.any():
+            raise RuntimeError(f"episodic memory full: agents {full.nonzero().flatten().tolist()} already hold "
+                               f"max_episodes={c.max_episodes} episodes (nothing stored)")
+        idx = mask.nonzero().flatten()
+        self.patterns[idx, self.count[idx]] = episode[idx]
+        self.count[idx] += 1
+
+    @torch.no_grad()
+    def reset(self, mask: torch.Tensor | None = None) -> None:
+        """Forget everything (for the agents where mask is True, default all)."""
+        mask = torch.ones(self.batch, dtype=torch.bool) if mask is None else mask.to(torch.bool)
+        mask = mask.to(self.count.device)
+        self.patterns[mask] = False
+        self.count[mask] = 0
+
+    # -- the network, dense (inspection) and factorised -------------------------------------------------------
+    def _stored(self, b: int) -> torch.Tensor:
+        return self.patterns[b, :int(self.count[b])].flatten(1).double()
+
+    def mean_activity(self, b: int = 0) -> torch.Tensor:
+        """Agent b's (N,) mean activity p over its stored episodes (zeros when empty)."""
+        x = self._stored(b)
+        return x.mean(0) if x.shape[0] else torch.zeros(x.shape[1], dtype=x.dtype, device=x.device)
+
+    def weights(self, b: int = 0) -> torch.Tensor:
+        """Agent b's dense (N, N) weights J = sum_mu (xi_mu - p)(xi_mu - p)^T with a zero diagonal."""
+        y = self._stored(b) - self.mean_activity(b)
+        J = y.T @ y
+        J.fill_diagonal_(0.0)
+        return J
+
+    def _net(self, mem: slice, batch: int) -> _Net:
+        x = self.patterns[mem, :int(self.count[mem].max())].flatten(2).float()
+        total = x.sum(1).expand(batch, -1).contiguous()
+        n = self.count[mem].to(x.dtype)[:, None].expand(batch, 1).contiguous()
+        return _Net(x, total, n, x.new_zeros(batch, 0, x.shape[2]))
+
+    @torch.no_grad()
+    def predict(self, state: torch.Tensor) -> torch.Tensor:
+        """What the network predicts for every neuron given the others, for states (B, rows, cols) in [0, 1]."""
+        net = self._net(slice(None), self.batch)
+        s = state.flatten(1).to(net.x)
+        return net.predict(s - net.mean()).view(state.shape)
+
+    # -- recall -----------------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def recall(self, cue: torch.Tensor, max_recalls: int | None = None) -> Recall:
+        """Recall the episodes the graded object-hub cue (B, cols) in [0, 1] points to, strongest first.
+
+        B equals the memory's batch, or the memory has batch 1 and serves B cues (many cues, one memory)."""
+        c = self.config
+        K = c.max_recalls if max_recalls is None else int(max_recalls)
+        if K < 1:
+            raise ValueError(f"max_recalls must be >= 1, got {K}")
+        if cue.dim() != 2 or cue.shape[1] != c.cols:
+            raise ValueError(f"cue shape {tuple(cue.shape)}, expected (B, {c.cols})")
+        if cue.shape[0] != self.batch and self.batch != 1:
+            raise ValueError(f"cue batch {cue.shape[0]} does not match the memory batch {self.batch}")
+        cue = cue.to(self.patterns.device, torch.float32)
+        if not ((cue >= -1e-5) & (cue <= 1 + 1e-5)).all():   # float rounding of a normalised activity is fine
+            raise ValueError("cue activity must lie in [0, 1] (and not be NaN)")
+        cue = cue.clamp(0.0, 1.0)
+        B, M, dev = cue.shape[0], int(self.count.max()), cue.device
+        episodes = torch.zeros(B, K, c.rows, c.cols, dtype=torch.bool, device=dev)
+        strength = torch.zeros(B, K, device=dev)
+        valid = torch.zeros(B, K, dtype=torch.bool, device=dev)
+        if M > 0:
+            shared = self.batch == 1
+            step = B if shared else max(1, min(c.chunk_agents, c.chunk_elements // (M * c.rows * c.cols)))
+            for lo in range(0, B, step):
+                sl = slice(lo, min(B, lo + step))
+                net = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start)
+                self._recall(cue[sl], net, episodes[sl], strength[sl], valid[sl])
+        # strongest first, valid before invalid (stable: equal strengths keep their retrieval order)
+        key = torch.where(valid, strength, torch.full_like(strength, -1.0))
+        order = torch.sort(key, dim=1, descending=True, stable=True).indices
+        episodes = episodes.gather(1, order[:, :, None, None].expand_as(episodes))
+        return Recall(episodes, strength.gather(1, order), valid.gather(1, order), valid.any(1))
+
+    def _recall(self, cue, net, episodes, strength, valid):
+        """Retrieve, depress, retrieve again; writes into the (B, K, ...) outputs."""
+        c = self.config
+        B, K = cue.shape[0], episodes.shape[1]
+        z = net.x.new_zeros(B, K, net.x.shape[2])
+        total, n = net.total.clone(), net.n.clone()
+        idx = torch.arange(B, device=cue.device)[n[:, 0] > 0]
+        for r in range(K):
+            if idx.numel() == 0:
+                break
+            sub = _Net(net.x, total, n, z[:, :r]).take(idx)
+            state, fixed = self._settle(cue[idx], sub)
+            obj = state[:, c.object_row].float()
+            s = (cue[idx] * obj).sum(1) / obj.sum(1).clamp(min=1.0)
+            ok = fixed & (s >= c.min_strength)
+            good = idx[ok]
+            episodes[good, r], strength[good, r], valid[good, r] = state[ok], s[ok], True
+            # depression: the retrieved state leaves the weights and the mean for the rest of this recall
+            z[good, r] = state[ok].flatten(1).float()
+            total[good] -= z[good, r]
+            n[good] -= 1
+            idx = good[n[good, 0] > 0]
+
+    def _settle(self, cue: torch.Tensor, net: _Net) -> tuple[torch.Tensor, torch.Tensor]:
+        """Clamped pattern completion, then free running; returns (state (B, rows, cols) bool, fixed point (B,)).
+
+        Each cue stops iterating at its own fixed point (the dynamics are deterministic, so it would stay there)."""
+        c = self.config
+        B, R, C = cue.shape[0], c.rows, c.cols
+        p = net.mean().view(B, R, C)
+        s = p.clone()                      # unknown rows sit at the mean: no evidence either way
+        s[:, c.object_row] = cue
+        for clamp, steps in ((True, c.cue_steps), (False, c.free_steps)):
+            idx, sub = torch.arange(B, device=cue.device), net   # the cues still moving
+            for _ in range(steps):
+                cur = s[idx]
+                new = k_winners(sub.predict((cur - p[idx]).flatten(1)).view_as(cur), self.row_k,
+                                c.threshold).to(cur.dtype)
+                if clamp:
+                    new[:, c.object_row] = cue[idx]
+                moving = (new != cur).flatten(1).any(1)
+                s[idx] = new
+                idx, sub = idx[moving], sub.take(moving) if not moving.all() else sub
+                if idx.numel() == 0:
+                    break
+        fixed = torch.ones(B, dtype=torch.bool, device=cue.device)
+        fixed[idx] = False                  # still moving when the free phase ran out of steps
+        return s.bool(), fixed

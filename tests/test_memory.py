@@ -1,0 +1,240 @@
+"""Episodic memory: hand-made episodes with known recalls, the paper's capacity, and the dense network as oracle."""
+
+import pytest
+import torch
+
+from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners
+
+R, C, OBJ = 20, 50, 1
+
+
+def episode(obj, reward, body_end=(8, 9), extra=()):
+    """An agent-like sheet: the same body state and reach/grasp/drop codes every time, its own object and reward."""
+    x = torch.zeros(R, C, dtype=torch.bool)
+    rows = [(0, (0, 1)), (OBJ, obj), (2, (2, 3)), (3, (4, 5)), (4, (6, 7)), (5, reward), (6, body_end)]
+    for r, idx in [*rows, *extra]:
+        x[r, list(idx)] = True
+    return x
+
+
+A = episode(range(0, 5), (3, 30))
+B = episode(range(5, 10), (7, 40), body_end=(10, 11))
+Cc = episode(range(10, 15), (0, 25))
+
+
+def memory(*episodes, batch=1, **cfg):
+    mem = EpisodicMemory(MemoryConfig(**cfg), batch=batch)
+    for e in episodes:
+        mem.store(e.expand(batch, R, C))
+    return mem
+
+
+def cue(*parts):
+    """Object-hub activity: value v on the object neurons of each (episode, v)."""
+    q = torch.zeros(C)
+    for e, v in parts:
+        q = torch.maximum(q, v * e[OBJ].float())
+    return q[None]
+
+
+def random_episodes(n, g, rows=R):
+    x = torch.zeros(n, R, C, dtype=torch.bool)
+    order = torch.rand(n, R, C, generator=g).argsort(-1)
+    for r in range(rows):
+        x[:, r].scatter_(1, order[:, r, :5 if r == OBJ else 2], True)
+    return x
+
+
+def test_hand_made_episodes_recalled_exactly_from_their_object_row():
+    mem = memory(A, B, Cc)
+    for e in (A, B, Cc):
+        out = mem.recall(cue((e, 1.0)))
+        assert out.any.item() and out.valid[0].tolist() == [True] + [False] * 7
+        assert torch.equal(out.episodes[0, 0], e)
+        assert out.strength[0, 0].item() == pytest.approx(1.0)
+        assert not out.episodes[0, 1:].any() and (out.strength[0, 1:] == 0).all()
+
+
+def test_empty_memory_and_unknown_cue_recall_nothing():
+    out = EpisodicMemory().recall(cue((A, 1.0)))
+    assert not out.any.item() and not out.valid.any() and not out.episodes.any()
+    q = torch.zeros(1, C)
+    q[0, 30:35] = 1.0  # object neurons no stored episode uses
+    assert not memory(A, B, Cc).recall(q).any.item()
+
+
+def test_graded_cue_recalls_the_episode_with_the_cue_strength():
+    # an object differing in one property of four: 0.75 on the stored assembly, a little activity elsewhere
+    q = cue((A, 0.75)) + 0.05 * (1 - A[OBJ].float())
+    out = memory(A, B, Cc).recall(q)
+    assert out.valid[0].sum() == 1 and torch.equal(out.episodes[0, 0], A)
+    assert out.strength[0, 0].item() == pytest.approx(0.75)
+
+
+def test_cue_overlapping_two_objects_recalls_both_strongest_first():
+    for first, second in ((A, B), (B, A)):
+        out = memory(A, B, Cc).recall(cue((second, 0.5), (first, 0.75)))
+        assert out.valid[0].tolist()[:3] == [True, True, False]
+        assert torch.equal(out.episodes[0, 0], first) and torch.equal(out.episodes[0, 1], second)
+        assert out.strength[0, :2].tolist() == pytest.approx([0.75, 0.5])
+    out = memory(A, B, Cc).recall(cue((A, 0.5), (B, 0.5), (Cc, 0.5)))
+    got = {tuple(e.flatten().nonzero().flatten().tolist()) for e in out.episodes[0, :3]}
+    assert out.valid[0].sum() == 3 and got == {tuple(e.flatten().nonzero().flatten().tolist()) for e in (A, B, Cc)}
+
+
+def test_empty_rows_stay_empty():
+    # B2 uses row 12, which A shares five of its seven rows with: recalling A must not borrow it
+    B2 = episode(range(5, 10), (7, 40), extra=[(12, (20, 21))])
+    mem = memory(A, B2, Cc)
+    out = mem.recall(cue((A, 1.0)))
+    assert torch.equal(out.episodes[0, 0], A)
+    assert not out.episodes[0, 0, 7:].any()  # rows no episode of A uses, including B2's row 12
+    assert torch.equal(mem.recall(cue((B2, 1.0))).episodes[0, 0], B2)
+
+
+def test_paper_capacity_230_random_episodes():
+    # Hopfield 2008 / the paper: ~230 episodes in 1000 neurons; all 20 rows random (5-hot object row, 2-hot others)
+    x = random_episodes(230, torch.Generator().manual_seed(0))
+    mem = memory()
+    for e in x:
+        mem.store(e[None])
+    # the strongest of the first two recalls: a stored neighbour sharing 4 of the 5 object neurons may come first
+    out = mem.recall(x[:, OBJ].float(), max_recalls=2)
+    exact = (out.episodes[:, 0] == x).flatten(1).all(1).float().mean().item()
+    assert exact >= 0.99
+
+
+def test_weights_are_the_covariance_of_the_stored_episodes():
+    # two episodes: p = (A + B) / 2, so J = 2 * ((A - B) / 2)((A - B) / 2)^T = (A - B)(A - B)^T / 2, zero diagonal
+    mem = memory(A, B)
+    d = (A.flatten().double() - B.flatten().double())
+    expected = torch.outer(d, d) / 2
+    expected.fill_diagonal_(0)
+    assert torch.equal(mem.weights(0), expected)
+    assert torch.equal(mem.mean_activity(0), (A.flatten().double() + B.flatten().double()) / 2)
+
+
+def dense_predict(J, p, s):
+    d = s - p
+    return p + (J @ d) / ((d * d).sum() - d * d).clamp(min=1e-3)
+
+
+def dense_recall(stored, q, cfg, K):
+    """The two-phase recall on the dense network; a retrieved episode is forgotten for the next retrieval."""
+    row_k = torch.tensor(cfg.row_k)
+    left, found = list(stored), []
+    for _ in range(K):
+        if not left:
+            break
+        x = torch.stack([e.flatten().double() for e in left])
+        p = x.mean(0)
+        J = (x - p).T @ (x - p)
+        J.fill_diagonal_(0)
+        s = p.clone().view(R, C)
+        s[OBJ] = q
+        for clamp, steps in ((True, cfg.cue_steps), (False, cfg.free_steps)):
+            for _ in range(steps):
+                new = k_winners(dense_predict(J, p, s.flatten()).view(R, C), row_k, cfg.threshold).double()
+                if clamp:
+                    new[OBJ] = q
+                moved = not torch.equal(new, s)
+                s = new
+                if not moved:
+                    break
+        strength = (q * s[OBJ]).sum() / s[OBJ].sum().clamp(min=1)
+        if moved or strength < cfg.min_strength:
+            break
+        found.append((s.bool(), strength.item()))
+        left = [e for e in left if not torch.equal(e, s.bool())]
+    return sorted(found, key=lambda f: -f[1])
+
+
+def test_factorised_network_equals_dense_network():
+    g = torch.Generator().manual_seed(3)
+    stored = list(random_episodes(12, g, rows=9))
+    mem = memory(*stored)
+    J, p = mem.weights(0), mem.mean_activity(0)
+    states = torch.rand(4, R, C, generator=g).double()
+    states[:2] = (states[:2] < 0.1).double()  # two binary states, two graded
+    got = mem.predict(states)
+    for s, a in zip(states, got):
+        assert torch.allclose(a.flatten().double(), dense_predict(J, p, s.flatten()), atol=1e-4)
+    # whole recalls: single objects, graded and mixed cues
+    cues = torch.stack([stored[0][OBJ].float(), 0.75 * stored[1][OBJ].float(),
+                        torch.maximum(0.8 * stored[2][OBJ].float(), 0.5 * stored[3][OBJ].float())])
+    out = mem.recall(cues, max_recalls=3)
+    for b in range(len(cues)):
+        want = dense_recall(stored, cues[b].double(), mem.config, 3)
+        assert out.valid[b].sum().item() == len(want) >= 1
+        for k, (e, strength) in enumerate(want):
+            assert torch.equal(out.episodes[b, k], e)
+            assert out.strength[b, k].item() == pytest.approx(strength, abs=1e-6)
+
+
+def test_agents_are_independent_and_many_cues_share_one_memory():
+    both = EpisodicMemory(batch=2)
+    both.store(torch.stack([A, B]))
+    both.store(torch.stack([Cc, Cc]), mask=torch.tensor([False, True]))  # only agent 1 learns C
+    assert both.count.tolist() == [1, 2]
+    for q in (cue((Cc, 0.8)).repeat(2, 1), torch.cat([cue((A, 1.0)), cue((B, 0.75))])):
+        out = both.recall(q)
+        for b, alone in enumerate((memory(A), memory(B, Cc))):
+            one = alone.recall(q[b:b + 1])
+            assert all(torch.equal(x[b:b + 1], y) for x, y in zip(out, one))
+    assert torch.equal(out.episodes[0, 0], A) and torch.equal(out.episodes[1, 0], B)
+    out = both.recall(cue((Cc, 0.8)).repeat(2, 1))
+    assert out.any.tolist() == [False, True] and torch.equal(out.episodes[1, 0], Cc)  # agent 0 never saw C
+    shared = memory(A, B, Cc).recall(torch.cat([cue((A, 1.0)), cue((B, 0.75)), cue((Cc, 0.5))]))
+    for b, e in enumerate((A, B, Cc)):
+        assert torch.equal(shared.episodes[b, 0], e) and shared.valid[b].sum() == 1
+
+
+def test_same_seed_same_result():
+    def run(seed):
+        x = random_episodes(60, torch.Generator().manual_seed(seed))
+        mem = memory()
+        for e in x:
+            mem.store(e[None])
+        return mem.recall(x[:, OBJ].float() * 0.9, max_recalls=2)
+    a, b, c = run(5), run(5), run(6)
+    assert all(torch.equal(x, y) for x, y in zip(a, b))
+    assert not torch.equal(a.episodes, c.episodes)
+
+
+def test_full_memory_refuses_and_keeps_what_it_has():
+    mem = memory(A, B, max_episodes=2)
+    with pytest.raises(RuntimeError, match="full"):
+        mem.store(Cc[None])
+    assert mem.count.tolist() == [2] and torch.equal(mem.patterns[0, 0], A) and torch.equal(mem.patterns[0, 1], B)
+    mem.store(Cc[None], mask=torch.tensor([False]))  # a masked-out agent is not written, so no error
+    mem.reset()
+    assert mem.count.tolist() == [0] and not mem.patterns.any() and not mem.recall(cue((A, 1.0))).any.item()
+
+
+def test_bad_input_is_refused():
+    mem = memory(A)
+    bad = A.clone()
+    bad[5, 44] = True  # three active neurons on a 2-of-50 row
+    with pytest.raises(ValueError, match="row 5 has 3"):
+        mem.store(bad[None])
+    with pytest.raises(ValueError, match="object row"):
+        mem.store(torch.zeros(1, R, C, dtype=torch.bool))
+    with pytest.raises(ValueError, match="shape"):
+        mem.store(A)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        mem.recall(2 * cue((A, 1.0)))
+    with pytest.raises(ValueError, match="batch"):
+        EpisodicMemory(batch=2).recall(torch.zeros(3, C))
+    with pytest.raises(ValueError, match="row_k"):
+        MemoryConfig(row_k=(2,) * 19)
+    assert mem.count.tolist() == [1]
+
+
+def test_state_dict_round_trip_and_device():
+    mem = memory(A, B, Cc)
+    copy = EpisodicMemory()
+    copy.load_state_dict(mem.state_dict())
+    assert set(mem.state_dict()) == {"patterns", "count"}
+    moved = copy.to(torch.device("cpu"))
+    q = cue((B, 0.75), (A, 0.5))
+    assert all(torch.equal(x, y) for x, y in zip(mem.recall(q), moved.recall(q)))
