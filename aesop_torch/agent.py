@@ -154,7 +154,7 @@ class Agent(nn.Module):
         """(B, K, P) bool: bottom-up activity differs from the activity each recalled episode retro-activates."""
         P, K = len(self.properties), recall.episodes.shape[1]
         out = torch.zeros(acts.shape[0], K, P, dtype=torch.bool)
-        for k in range(K):
+        for k in range(int(recall.valid.sum(1).max())):  # recalls are sorted valid-first
             top = self.hub.top_down(recall.episodes[:, k, ROW_OBJECT].to(acts.dtype))  # (B, P_all, U)
             top = torch.einsum("bpu,puv->bpv", top, self.lateral)
             cos = nn.functional.cosine_similarity(acts[:, :P], top[:, :P], dim=-1, eps=1e-12)

@@ -68,6 +68,9 @@ class ObjectHub(nn.Module):
         self.register_buffer("W", torch.zeros(batch, P, U, N))
         self.register_buffer("strength", torch.ones(batch, P))
         self.register_buffer("usage", torch.zeros(batch, N, dtype=torch.long))
+        # wired[b, m, k]: map m has a pathway to hub neuron k (W[b, m, :, k] has a 1); kept beside W because
+        # reading all of W for it on every bottom-up pass cost as much as the pass itself
+        self.register_buffer("wired", torch.zeros(batch, P, N, dtype=torch.bool))
         self.register_buffer("assemblies", torch.zeros(batch, c.max_assemblies, N, dtype=torch.bool))
         self.register_buffer("n_assemblies", torch.zeros(batch, dtype=torch.long))
 
@@ -103,7 +106,7 @@ class ObjectHub(nn.Module):
         if self.config.relative_activity:
             acts = acts / acts.amax(-1, keepdim=True).clamp_min(1e-12)
         drive = torch.einsum("bpu,bpuk->bpk", acts, self.W).clamp(max=1.0)       # (B, P, N)
-        gate = self.strength[:, :, None] * present[:, :, None] * (self.W.amax(2) > 0)  # (B, P, N)
+        gate = self.strength[:, :, None] * present[:, :, None] * self.wired  # (B, P, N)
         den = gate.sum(1)
         return torch.where(den > 0, (gate * drive).sum(1) / den.clamp_min(1e-12), torch.zeros_like(den))
 
@@ -185,6 +188,7 @@ class ObjectHub(nn.Module):
         assembly &= mask[:, None]
         b, m = active.nonzero(as_tuple=True)
         self.W[b, m, winners[b, m]] = torch.maximum(self.W[b, m, winners[b, m]], assembly[b].to(self.W.dtype))
+        self.wired |= active[:, :, None] & assembly[:, None, :]
         self.usage += assembly.long()
         slot = self.n_assemblies.clamp(max=self.config.max_assemblies - 1)
         rows = torch.arange(B, device=self.W.device)[mask]
