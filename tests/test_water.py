@@ -1,0 +1,157 @@
+"""Buoyancy by simulation (sim/water.py), without the robot: objects dropped or stood in the jar settle where
+Archimedes says, to within 2 %; the level solve is exact for prisms; the green ball floats at the surface."""
+
+import math
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from sim.objects import DEFAULT_OBJECTS_FILE, JarSpec, ObjectSpec, archimedes_cm3, load_objects
+from sim.water import CM, Tank, TankConfig, Water, make_body, sample_points
+
+JAR = JarSpec(12.0, 20.0, 14.0)
+
+
+@pytest.fixture
+def client():
+    c = p.connect(p.DIRECT)
+    yield c
+    p.disconnect(c)
+
+
+def new_tank(client, jar=JAR) -> Tank:
+    tank = Tank(client, jar, [0.0, 0.0], 0.0)
+    R = jar.inner_diameter_cm / 2
+    pos = tank.ball_rest_pos()
+    pos[0] += (R - tank.config.ball_diameter_cm / 2 - 0.1) * CM  # against the +x wall, as in the world
+    p.resetBasePositionAndOrientation(tank.ball, pos, [0, 0, 0, 1], physicsClientId=client)
+    assert tank.run_until_settled()[0]
+    return tank
+
+
+def displaced_cm3(tank: Tank, spec: ObjectSpec, z_bottom_cm: float | None = None) -> float:
+    """Drop spec (its bottom 1 cm above the rim, or stand it at z_bottom_cm) beside the ball; cm^3 displaced."""
+    level0 = tank.level_cm
+    x = -(tank.config.ball_diameter_cm + 0.1) / 2 * CM  # the middle of the room beside the ball
+    bottom = tank.rim_z + 0.01 if z_bottom_cm is None else tank.bottom_z + z_bottom_cm * CM
+    tank.add_object(spec, [x, 0.0, bottom + spec.height_cm * CM / 2])
+    settled, _ = tank.run_until_settled()
+    assert settled
+    return (tank.level_cm - level0) * tank.jar.area_cm2
+
+
+CASES = [(shape, dims, m) for shape, dims, masses in [
+    ("cylinder", (5.0, 8.0), (5, 60, 300, 600)),      # 157 cm^3
+    ("cube", (5.0,), (5, 100, 600)),                  # 125 cm^3
+    ("sphere", (6.0,), (5, 50, 600)),                 # 113 cm^3
+    ("box", (4.0, 5.0, 6.0), (5, 80, 600)),           # 120 cm^3
+] for m in masses]
+
+
+@pytest.mark.parametrize("shape, dims, mass", CASES)
+def test_dropped_object_displaces_what_archimedes_says(client, shape, dims, mass):
+    spec = ObjectSpec("o", shape, dims, float(mass), (0.5, 0.5, 0.5))
+    expected = archimedes_cm3(spec, JAR)
+    assert expected == pytest.approx(mass if not spec.sinks else spec.volume_cm3, rel=1e-9)
+    assert displaced_cm3(new_tank(client), spec) == pytest.approx(expected, rel=0.02)
+
+
+DEFAULTS = load_objects(DEFAULT_OBJECTS_FILE)
+
+
+@pytest.mark.parametrize("name", [o.name for o in DEFAULTS.train + DEFAULTS.probe])
+def test_every_default_object(client, name):
+    spec = DEFAULTS.get(name)
+    assert displaced_cm3(new_tank(client, DEFAULTS.jar), spec) == pytest.approx(
+        archimedes_cm3(spec, DEFAULTS.jar), rel=0.02)
+
+
+def test_the_papers_cylinders(client):
+    tank = new_tank(client)
+    heavy = ObjectSpec("h", "cylinder", (6.36, 11.5), 420.0, (1, 0, 0))
+    assert displaced_cm3(tank, heavy) == pytest.approx(365.3, rel=0.02)
+    tank = new_tank(client)
+    light = ObjectSpec("l", "cylinder", (6.36, 11.5), 14.0, (1, 0, 0))
+    assert displaced_cm3(tank, light) == pytest.approx(14.0, rel=0.02)
+
+
+def test_tall_sinker_sticking_out_displaces_only_its_wet_part(client):
+    # 4 cm wide, 19 cm tall, 600 g, standing in 10 cm of water: L = 10 * 36 / (36 - 4) = 11.25 cm, V = 45 pi
+    jar = JarSpec(12.0, 20.0, 10.0)
+    tall = ObjectSpec("t", "cylinder", (4.0, 19.0), 600.0, (1, 0, 0))
+    tank = new_tank(client, jar)
+    got = displaced_cm3(tank, tall, z_bottom_cm=0.2)
+    assert got == pytest.approx(45 * math.pi, rel=0.02)
+    assert got < 0.7 * tall.volume_cm3  # clearly not the whole volume
+    body = list(tank.water.bodies)[-1]  # the post, added after the ball
+    assert p.getAABB(body, -1, physicsClientId=client)[1][2] > tank.water.level  # it does stick out
+
+
+def test_ball_floats_at_the_surface(client):
+    tank = new_tank(client)
+    c = tank.config
+    r = c.ball_diameter_cm / 2
+    v_sub = tank.water.submerged_volume(tank.ball) / CM ** 3
+    assert v_sub == pytest.approx(c.ball_mass_g, rel=0.01)  # floats: displaces its mass
+    centre_cm = p.getBasePositionAndOrientation(tank.ball, physicsClientId=client)[0][2] / CM
+    draft = tank.water.level / CM - (centre_cm - r)
+    # the cap below the surface holds the ball's mass of water: pi h^2 (3r - h) / 3 = m, solved by bisection
+    lo, hi = 0.0, 2 * r
+    for _ in range(60):
+        h = (lo + hi) / 2
+        lo, hi = (h, hi) if math.pi * h * h * (3 * r - h) / 3 < c.ball_mass_g else (lo, h)
+    assert draft == pytest.approx(h, abs=0.05)  # within half a millimetre
+    assert tank.level_cm == pytest.approx(JAR.water_depth_cm, abs=0.002)  # the jar's depth is with the ball in
+
+
+def test_level_solve_is_exact_for_prisms(client):
+    # static posts, no dynamics: the level obeys L = L0 + a L / A exactly (the layer smoothing is exact here)
+    A = 36 * math.pi                    # cm^2, 12 cm jar
+    water = Water(client, [0.0, 0.0], 0.0, 0.06, A * 3.0 * CM ** 3, 1 / 240)   # 3 cm of water alone
+    standing = make_body(client, "box", [0.04, 0.04, 0.19], 0.0, (1, 0, 0), [0.0, 0.0, 0.095], 0.5)
+    water.add_body(standing, "box", [0.04, 0.04, 0.19])
+    water.update_level()
+    L = 3.0 * A / (A - 16)
+    assert water.depth / CM == pytest.approx(L, rel=1e-6)
+    assert water.submerged_volume(standing) / CM ** 3 == pytest.approx(16 * L, rel=1e-6)
+    # the same 4 x 5 x 6 box laid on its side (90 degrees about x): footprint 4 x 6, 5 tall
+    water.remove_body(standing)
+    p.removeBody(standing, physicsClientId=client)
+    lying = make_body(client, "box", [0.04, 0.05, 0.06], 0.0, (1, 0, 0), [0.0, 0.0, 0.025], 0.5)
+    p.resetBasePositionAndOrientation(lying, [0.0, 0.0, 0.025], p.getQuaternionFromEuler([math.pi / 2, 0, 0]),
+                                      physicsClientId=client)
+    water.add_body(lying, "box", [0.04, 0.05, 0.06])
+    water.update_level()
+    L = 3.0 * A / (A - 24)
+    assert L < 5.0
+    assert water.submerged_volume(lying) / CM ** 3 == pytest.approx(24 * L, rel=1e-6)
+    # outside the jar nothing is wet
+    p.resetBasePositionAndOrientation(lying, [0.2, 0.0, 0.025], [0, 0, 0, 1], physicsClientId=client)
+    water.update_level()
+    assert water.submerged_volume(lying) == 0.0 and water.depth / CM == pytest.approx(3.0, rel=1e-9)
+
+
+@pytest.mark.parametrize("shape, size", [("cylinder", (0.05, 0.05, 0.08)), ("sphere", (0.06,) * 3),
+                                         ("box", (0.04, 0.05, 0.06))])
+def test_sample_points_fill_the_shape(shape, size):
+    pts, w, spacing = sample_points(shape, size, 4096)
+    exact = {"cylinder": math.pi * 0.025 ** 2 * 0.08, "sphere": math.pi * 0.06 ** 3 / 6, "box": 0.04 * 0.05 * 0.06}
+    assert w.sum() == pytest.approx(exact[shape], rel=1e-12) and np.allclose(w, w[0])
+    assert 2000 < len(pts) < 8000 and np.all((0 < spacing) & (spacing < np.asarray(size) / 8))
+    half = np.asarray(size) / 2
+    assert np.all(np.abs(pts) <= half)
+    if shape == "sphere":
+        assert np.all(np.sum((pts / half) ** 2, axis=1) <= 1)
+    assert np.allclose(pts.mean(axis=0), 0, atol=1e-12)       # centre of buoyancy of the whole body: its centre
+    again, _, _ = sample_points(shape, size, 4096)
+    assert np.array_equal(pts, again)
+
+
+def test_bad_input_is_refused(client):
+    with pytest.raises(ValueError, match="shape"):
+        sample_points("cone", (0.1, 0.1, 0.1), 100)
+    with pytest.raises(ValueError, match="size_xyz"):
+        sample_points("box", (0.1, -0.1, 0.1), 100)
+    with pytest.raises(ValueError, match="ball"):
+        Tank(client, JarSpec(4.0, 20.0, 10.0), [0, 0], 0.0, TankConfig())
