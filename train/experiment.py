@@ -1,0 +1,168 @@
+"""Cumulative learning over episodes: B agents, one per presentation order, learning side by side.
+
+The physics is a source of measurements and outcomes. With the jar reset between episodes an object's outcome does
+not depend on the order it came in, so by default (`physics="cached"`) each distinct object is simulated once and its
+measured outcome reused by every agent; `physics="per-episode"` runs the full simulation for every episode of every
+agent. Either way the agent only ever sees what the world measured.
+"""
+
+from __future__ import annotations
+
+import math
+import statistics
+from dataclasses import dataclass, field
+
+import torch
+
+from aesop_torch.agent import Agent, AgentConfig
+from aesop_torch.rules import PROPERTIES, RULE_NAMES
+
+MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
+
+
+def stack_measurements(ms: list[dict]) -> dict:
+    """A list of per-object measurement dicts -> one batched dict of float32 tensors."""
+    return {k: torch.tensor([list(m[k]) if hasattr(m[k], "__len__") else m[k] for m in ms], dtype=torch.float32)
+            for k in MEASUREMENT_KEYS}
+
+
+def plain_measurement(m: dict) -> dict:
+    """A world measurement as plain floats and lists (it goes into checkpoints and JSON)."""
+    return {k: [float(v) for v in m[k]] if hasattr(m[k], "__len__") else float(m[k]) for k in MEASUREMENT_KEYS}
+
+
+def outcome_record(outcome) -> dict:
+    """The part of a world EpisodeOutcome the experiment keeps (plain numbers: it goes into checkpoints)."""
+    return {
+        "measurement": plain_measurement(outcome.measurement),
+        "observed_cm3": float(outcome.observed_cm3),
+        "archimedes_cm3": float(outcome.archimedes_cm3),
+        "goal_before": bool(outcome.goal_reachable_before),
+        "goal_after": bool(outcome.goal_reached_after),
+    }
+
+
+def draw_orders(n_objects: int, orders: str, seed: int) -> list[list[int]]:
+    """'listed' -> the file's order; 'all' -> every permutation; 'N' -> N random orders from the seed."""
+    if orders == "listed":
+        return [list(range(n_objects))]
+    if orders == "all":
+        import itertools
+        return [list(p) for p in itertools.permutations(range(n_objects))]
+    g = torch.Generator().manual_seed(seed)
+    return [torch.randperm(n_objects, generator=g).tolist() for _ in range(int(orders))]
+
+
+def median_rel_error(predicted: torch.Tensor, truth: torch.Tensor) -> float | None:
+    """Median over probes of |predicted - truth| / truth; None while no probe can be predicted. A probe the agent
+    cannot predict yet (nothing recalled) counts as a 100 % error: expecting nothing is as wrong as expecting 0 cm^3."""
+    if len(truth) == 0 or torch.isnan(predicted).all():
+        return None
+    err = torch.nan_to_num((predicted - truth).abs() / truth, nan=1.0)
+    return float(statistics.median(err.tolist()))
+
+
+def _num(x: float) -> float | None:
+    return None if (x is None or math.isnan(x)) else round(float(x), 2)
+
+
+@dataclass
+class Experiment:
+    """All state of a run: checkpointing it (see `state_dict`) is enough to resume it exactly."""
+    train_names: list[str]
+    probe_names: list[str]
+    orders: list[list[int]]
+    seed: int = 0
+    physics: str = "cached"
+    config: AgentConfig = field(default_factory=AgentConfig)
+    t: int = 0                                      # episodes done in every order
+    records: list[list[dict]] = field(default_factory=list)
+    outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
+    probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
+
+    def __post_init__(self):
+        self.config.seed = self.seed
+        # an agent encodes at most one episode (and one object) per train object: size the buffers to that, so a
+        # population of 40,320 agents fits in memory
+        self.config.memory.max_episodes = min(self.config.memory.max_episodes, len(self.train_names))
+        self.config.hub.max_assemblies = min(self.config.hub.max_assemblies, len(self.train_names))
+        self.agent = Agent(self.config, batch=len(self.orders))
+        if not self.records:
+            self.records = [[] for _ in self.orders]
+
+    @property
+    def n_episodes(self) -> int:
+        return len(self.train_names)
+
+    @property
+    def done(self) -> bool:
+        return self.t >= self.n_episodes
+
+    def step(self, world_episode) -> list[dict]:
+        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record."""
+        names = [self.train_names[o[self.t]] for o in self.orders]
+        outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
+        meas = stack_measurements([o["measurement"] for o in outs])
+        observed = torch.tensor([o["observed_cm3"] for o in outs])
+        before = torch.tensor([o["goal_before"] for o in outs])
+        after = torch.tensor([o["goal_after"] for o in outs])
+        res = self.agent.step(meas, observed, before, after)
+        fired = res.rules_fired()
+        probe_err = self.probe_errors()
+        new = []
+        for b, (name, out) in enumerate(zip(names, outs)):
+            rec = {
+                "object": name,
+                "predicted_cm3": _num(float(res.expected[b])),
+                "observed_cm3": round(out["observed_cm3"], 2),
+                "archimedes_cm3": round(out["archimedes_cm3"], 2),
+                "rules": {p: RULE_NAMES[int(fired[b, i])] for i, p in enumerate(PROPERTIES)},
+                "knowledge": self.agent.knowledge(b),
+                "encoded": bool(res.encoded[b]),
+                "goal_reached": out["goal_after"],
+                "probe_rel_error": None if probe_err[b] is None else round(probe_err[b], 4),
+            }
+            self.records[b].append(rec)
+            new.append(rec)
+        self.t += 1
+        return new
+
+    def predict(self, measurement: dict) -> torch.Tensor:
+        """(B,) what each order's agent expects one object (a plain measurement dict) to displace, in cm^3."""
+        return self.agent.predict(stack_measurements([measurement] * len(self.orders)))
+
+    def probe_predictions(self) -> torch.Tensor:
+        """(B, n_probes) expected cm^3 for every probe object, learning frozen."""
+        cols = [self.predict(self.probes[name]["measurement"]) for name in self.probe_names]
+        return torch.stack(cols, dim=1) if cols else torch.zeros(len(self.orders), 0)
+
+    def probe_errors(self) -> list[float | None]:
+        pred = self.probe_predictions()
+        truth = torch.tensor([self.probes[n]["archimedes_cm3"] for n in self.probe_names])
+        return [median_rel_error(pred[b], truth) for b in range(len(self.orders))]
+
+    def final_knowledge(self) -> list[dict]:
+        return [self.agent.knowledge(b) for b in range(len(self.orders))]
+
+    # -- checkpointing ----------------------------------------------------------------------------------------
+    def state_dict(self) -> dict:
+        return {
+            "train_names": self.train_names, "probe_names": self.probe_names, "orders": self.orders,
+            "seed": self.seed, "physics": self.physics, "config": self.config.to_dict(), "t": self.t,
+            "records": self.records, "outcomes": self.outcomes, "probes": self.probes,
+            "agent": self.agent.state_dict(),
+        }
+
+    @classmethod
+    def from_state_dict(cls, state: dict) -> "Experiment":
+        exp = cls(state["train_names"], state["probe_names"], state["orders"], state["seed"], state["physics"],
+                  AgentConfig.from_dict(state["config"]), state["t"], state["records"], state["outcomes"],
+                  state["probes"])
+        exp.agent.load_state_dict(state["agent"])
+        return exp
+
+
+def load_experiment(path) -> Experiment:
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt) as a live Experiment, agents included."""
+    from train.checkpoint import load
+    return Experiment.from_state_dict(load(path)["experiment"])

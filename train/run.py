@@ -1,0 +1,201 @@
+"""The experiment runner: cumulative causal learning in the pybullet world, with checkpoints and tensorboard.
+
+    python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
+                        [--physics cached|per-episode] [--frames] [--gui]
+
+Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic),
+figure2.png, frames/ (with --frames) and summary.json (SPEC.md). Bad input: one line on stderr, exit code 2, nothing
+written.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+if __package__ in (None, ""):  # run as a script: make the project importable without installing it
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from train.checkpoint import load, save_atomic, write_text_atomic  # noqa: E402
+from train.experiment import Experiment, draw_orders, outcome_record, plain_measurement  # noqa: E402
+from train.progress import Progress  # noqa: E402
+from train.summary import build_summary, knowledge_table  # noqa: E402
+
+DEFAULT_OBJECTS = Path(__file__).resolve().parents[1] / "sim" / "default_objects.json"
+DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
+FULL_TB_ORDERS = 16      # tensorboard run directories beyond this would drown a person; see README
+
+
+class UsageError(Exception):
+    """Bad input: reported as one line and exit code 2."""
+
+
+class Parser(argparse.ArgumentParser):
+    def error(self, message):  # argparse prints usage + message; we promise one clear line
+        raise UsageError(message)
+
+
+def parse_args(argv):
+    ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0])
+    ap.add_argument("--objects", type=Path, default=DEFAULT_OBJECTS, help="objects file (JSON, SPEC.md schema)")
+    ap.add_argument("--orders", default=DEFAULT_ORDERS, help="N random orders, 'listed' or 'all' permutations")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=None, help="output directory (default runs/<date-time>)")
+    ap.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
+    ap.add_argument("--physics", choices=("cached", "per-episode"), default="cached",
+                    help="simulate each distinct object once (cached) or every episode of every order")
+    ap.add_argument("--frames", action="store_true", help="save camera frames of each simulated drop")
+    ap.add_argument("--gui", action="store_true", help="pybullet GUI (needs a display)")
+    a = ap.parse_args(argv)
+    if a.orders not in ("listed", "all"):
+        if not a.orders.isdigit() or int(a.orders) < 1:
+            raise UsageError(f"--orders must be a positive number, 'listed' or 'all', not {a.orders!r}")
+    if a.seed < 0:
+        raise UsageError(f"--seed must be >= 0, not {a.seed}")
+    if a.resume and a.out is None:
+        raise UsageError("--resume needs --out DIR (the run to continue)")
+    if a.out is None:
+        a.out = Path("runs") / time.strftime("run-%Y%m%d-%H%M%S")
+    return a
+
+
+def load_objects_or_fail(path: Path):
+    from sim.objects import ObjectsFileError, load_objects
+    try:
+        return load_objects(path)
+    except ObjectsFileError as e:
+        raise UsageError(f"{path}: {e}") from None
+
+
+def prepare(args):
+    """Validate everything and return (experiment, objects, resumed) before a single byte is written."""
+    objects = load_objects_or_fail(args.objects)
+    ckpt_path = args.out / "checkpoints" / "latest.pt"
+    train_names = [o.name for o in objects.train]
+    probe_names = [o.name for o in objects.probe]
+    if args.resume:
+        if not ckpt_path.is_file():
+            raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
+        try:
+            state = load(ckpt_path)
+        except Exception as e:  # a foreign or damaged file: say so in one line
+            raise UsageError(f"--resume: cannot read {ckpt_path}: {type(e).__name__}") from None
+        wanted = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
+                  "orders_arg": args.orders}
+        for key, value in wanted.items():
+            if state["run"].get(key) != value:
+                raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
+        return Experiment.from_state_dict(state["experiment"]), objects, True
+    if args.out.exists() and any(args.out.iterdir()):
+        raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
+    orders = draw_orders(len(train_names), args.orders, args.seed)
+    return Experiment(train_names, probe_names, orders, seed=args.seed, physics=args.physics), objects, False
+
+
+def main(argv=None) -> int:
+    try:
+        args = parse_args(sys.argv[1:] if argv is None else argv)
+        exp, objects, resumed = prepare(args)
+    except UsageError as e:
+        print(f"train/run.py: error: {e}", file=sys.stderr)
+        return 2
+    return run(args, exp, objects, resumed)
+
+
+def run(args, exp: Experiment, objects, resumed: bool) -> int:
+    import torch
+
+    from sim.world import World
+    # small tensors (a few agents, IK of one arm) run faster on one thread than on two fighting each other;
+    # a large population's big tensors use both cores
+    torch.set_num_threads(1 if len(exp.orders) <= 256 else 2)
+    from train.tensorboard_log import OrderLog
+
+    out = args.out
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.time()
+    world = None
+
+    def get_world():
+        nonlocal world
+        if world is None:
+            world = World(objects, gui=args.gui, seed=args.seed)
+        return world
+
+    frames_dir = out / "frames" if args.frames else None
+    specs = {o.name: o for o in objects.train + objects.probe}
+
+    def simulate(name: str, tag: str) -> dict:
+        outcome = get_world().run_episode(name, record=frames_dir is not None)
+        if frames_dir is not None and outcome.frames:
+            from sim.episode import save_frames_png
+            save_frames_png(outcome.frames, frames_dir / tag)
+        return outcome_record(outcome)
+
+    def world_episode(name: str, b: int, t: int) -> dict:
+        if exp.physics == "per-episode":
+            return simulate(name, f"order{b + 1:02d}_ep{t + 1:02d}_{name}")
+        if name not in exp.outcomes:
+            exp.outcomes[name] = simulate(name, name)
+        return exp.outcomes[name]
+
+    from sim.objects import archimedes_cm3
+    for name in exp.probe_names:
+        if name not in exp.probes:
+            exp.probes[name] = {"measurement": plain_measurement(get_world().inspect(name)),
+                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
+
+    run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
+                "orders_arg": args.orders}
+    logs = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
+            for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
+    if not resumed:
+        hp = {"seed": args.seed, "physics": args.physics, "orders": args.orders,
+              "objects": str(args.objects), **_flat("agent", exp.config.to_dict())}
+        for b, log in enumerate(logs):
+            log.hparams({**hp, "order": " ".join(exp.train_names[i] for i in exp.orders[b])},
+                        {"prediction/probe_rel_error": float("nan")})
+    print(f"{'resuming' if resumed else 'running'}: {len(exp.orders)} order(s) x {exp.n_episodes} episodes, "
+          f"physics {exp.physics}" + (" (each distinct object simulated once, its measured outcome reused by "
+                                       "every order: the jar is reset between episodes)" if exp.physics == "cached"
+                                       else ""), flush=True)
+    progress = Progress(exp.n_episodes)
+    while not exp.done:
+        t = exp.t
+        recs = exp.step(world_episode)
+        for b, log in enumerate(logs):
+            log.episode(t, recs[b])
+        save_atomic({"run": run_meta, "experiment": exp.state_dict()}, out / "checkpoints" / "latest.pt")
+        progress.update(exp.t, recs[0]["object"], recs[0]["rules"])
+
+    summary = build_summary(exp)
+    from train.figures import figure2
+    fig = figure2(exp.records)
+    fig.savefig(out / "figure2.png", dpi=110)
+    for log in logs:
+        log.writer.add_figure("figure2", fig, exp.n_episodes)
+        log.close()
+    write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
+    if world is not None:
+        world.close()
+    print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
+          f"checkpoints/latest.pt" + (", frames/" if frames_dir else "") + f"  [{time.time() - t0:.1f} s]")
+    print(knowledge_table(summary))
+    return 0
+
+
+def _flat(prefix: str, d: dict) -> dict:
+    out = {}
+    for k, v in d.items():
+        if isinstance(v, dict):
+            out.update(_flat(f"{prefix}.{k}", v))
+        else:
+            out[f"{prefix}.{k}"] = v
+    return out
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,61 @@
+"""summary.json (SPEC.md contract) and the short table the runner prints at the end.
+
+For large populations (more than FULL_RUNS orders) `runs` keeps the full episode records of the first FULL_RUNS
+orders only, and a compact `population` block covers every order: its final knowledge (one letter per property:
+U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error, and the fraction of orders that
+agree with the most common final knowledge. `order_independent` is always computed over every order.
+"""
+
+from __future__ import annotations
+
+from collections import Counter
+
+from aesop_torch.rules import PROPERTIES, STATES
+
+FULL_RUNS = 64  # 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB
+
+
+def knowledge_key(k: dict) -> str:
+    return "".join("ULDI"[STATES.index(k[p]["state"])] for p in PROPERTIES)
+
+
+def build_summary(exp) -> dict:
+    names = exp.train_names
+    finals = exp.final_knowledge()
+    runs = []
+    for b in range(min(len(exp.orders), FULL_RUNS)):
+        runs.append({"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b],
+                     "final_knowledge": finals[b]})
+    keys = [knowledge_key(k) for k in finals]
+    summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": len(set(keys)) == 1}
+    if len(exp.orders) > FULL_RUNS:
+        common, n = Counter(keys).most_common(1)[0]
+        summary["population"] = {
+            "orders": len(exp.orders),
+            "key": "one letter per property (" + ", ".join(PROPERTIES)
+                   + "): U unknown, L likely irrelevant, D dominant, I irrelevant",
+            "most_common_knowledge": common,
+            "agree_fraction": n / len(keys),
+            "final_knowledge": keys,
+            "final_probe_rel_error": [exp.records[b][-1]["probe_rel_error"] for b in range(len(exp.orders))],
+        }
+    return summary
+
+
+def knowledge_table(summary: dict) -> str:
+    runs = summary["runs"]
+    lines = [f"{'order':<7}" + "".join(f"{p:<20}" for p in PROPERTIES) + "probe error first -> last"]
+    for i, run in enumerate(runs[:12]):
+        errs = [e["probe_rel_error"] for e in run["episodes"] if e["probe_rel_error"] is not None]
+        err = f"{100 * errs[0]:.1f}% -> {100 * errs[-1]:.1f}%" if errs else "n/a"
+        cells = "".join(f"{k['state']} ({k['certainty']:.2f})".ljust(20)
+                        for k in (run["final_knowledge"][p] for p in PROPERTIES))
+        lines.append(f"{i + 1:<7}{cells}{err}")
+    if len(runs) > 12:
+        lines.append(f"... {len(runs) - 12} more orders in summary.json")
+    pop = summary.get("population")
+    if pop:
+        lines.append(f"population: {pop['orders']} orders, {100 * pop['agree_fraction']:.2f}% agree on "
+                     f"{pop['most_common_knowledge']} ({pop['key']})")
+    lines.append(f"order_independent: {str(summary['order_independent']).lower()}")
+    return "\n".join(lines)

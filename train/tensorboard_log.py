@@ -1,0 +1,50 @@
+"""Tensorboard for a run: one run directory per presentation order, tags as in SPEC.md.
+
+Scalars `certainty/<property>`, `prediction/abs_error_cm3` (|prediction - Archimedes| for the dropped object, once a
+prediction can be made), `prediction/probe_rel_error`, `rules/<property>/<E|G|U|S>` (1 when that rule fired that
+episode, else 0); text `episodes` (one line per episode); hparams once per run, in the run's own directory.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from torch.utils.tensorboard import SummaryWriter
+from torch.utils.tensorboard.summary import hparams
+
+from aesop_torch.rules import PROPERTIES, RULE_NAMES
+
+
+def episode_line(t: int, rec: dict) -> str:
+    exp = "-" if rec["predicted_cm3"] is None else f"{rec['predicted_cm3']:.1f}"
+    rules = " ".join(f"{p}:{rec['rules'][p]}" for p in PROPERTIES)
+    return (f"episode {t + 1}: {rec['object']} expected={exp} observed={rec['observed_cm3']:.1f} "
+            f"archimedes={rec['archimedes_cm3']:.1f} rules[{rules}] encoded={rec['encoded']}")
+
+
+class OrderLog:
+    """Writer for one order's run directory. `purge_step` drops events a killed run wrote past its checkpoint."""
+
+    def __init__(self, logdir: Path, purge_step: int | None = None):
+        self.writer = SummaryWriter(log_dir=str(logdir), purge_step=purge_step)
+
+    def hparams(self, params: dict, metrics: dict) -> None:
+        clean = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in params.items()}
+        for summary in hparams(clean, metrics):
+            self.writer.file_writer.add_summary(summary)
+
+    def episode(self, t: int, rec: dict) -> None:
+        w, step = self.writer, t + 1
+        for p in PROPERTIES:
+            w.add_scalar(f"certainty/{p}", rec["knowledge"][p]["certainty"], step)
+            for r in RULE_NAMES:
+                w.add_scalar(f"rules/{p}/{r}", float(rec["rules"][p] == r), step)
+        if rec["predicted_cm3"] is not None:
+            w.add_scalar("prediction/abs_error_cm3", abs(rec["predicted_cm3"] - rec["archimedes_cm3"]), step)
+        if rec["probe_rel_error"] is not None:
+            w.add_scalar("prediction/probe_rel_error", rec["probe_rel_error"], step)
+        w.add_text("episodes", episode_line(t, rec), step)
+        w.flush()
+
+    def close(self) -> None:
+        self.writer.close()
