@@ -15,11 +15,12 @@ MAX_CURVES = 12  # beyond this a population is drawn as its median and spread, n
 
 def figure2(runs: list[list[dict]]):
     """runs: per order, the episode records of summary.json. Returns a matplotlib Figure."""
-    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4), gridspec_kw={"width_ratios": [3, 2]})
+    fig, (left, right) = plt.subplots(1, 2, figsize=(11, 4.6), gridspec_kw={"width_ratios": [3, 2]})
     episodes = range(1, len(runs[0]) + 1)
-    for p in PROPERTIES:
-        # certainty of the first order, as the paper plots one exploration; state names at the last episode
-        left.plot(episodes, [r["knowledge"][p]["certainty"] for r in runs[0]], marker="o", label=p)
+    for p, style in zip(PROPERTIES, ("-o", "--s", ":^", "-.D")):
+        # certainty of the first order, as the paper plots one exploration; state names at the last episode.
+        # Distinct line styles: curves that reach 1 together stay visible on top of each other.
+        left.plot(episodes, [r["knowledge"][p]["certainty"] for r in runs[0]], style, label=p, alpha=0.8)
     last = runs[0][-1]["knowledge"] if runs[0] else {}
     left.set_title("causal knowledge (order 1): " + ", ".join(f"{p} {last[p]['state']}" for p in last), fontsize=8)
     left.set_xlabel("episode (object explored)")

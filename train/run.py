@@ -133,6 +133,8 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
         if frames_dir is not None and outcome.frames:
             from sim.episode import save_frames_png
             save_frames_png(outcome.frames, frames_dir / tag)
+            for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
+                logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
         return outcome_record(outcome)
 
     def world_episode(name: str, b: int, t: int) -> dict:
