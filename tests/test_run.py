@@ -138,3 +138,14 @@ def test_killed_run_resumes_to_the_same_summary(paper_file, paper_run, tmp_path)
     r = subprocess.run(runner("--objects", str(paper_file), "--orders", "listed", "--out", str(out), "--resume",
                               "--seed", "5"), capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and "seed" in r.stderr and (out / "summary.json").read_text() == before
+
+
+def test_shipped_default_checkpoint_predicts_as_the_readme_says():
+    from train.experiment import load_experiment
+    path = ROOT / "checkpoints" / "default.pt"
+    assert torch.load(path, weights_only=True)["run"]["orders_arg"] == "4"
+    exp = load_experiment(path)
+    green_heavy_cylinder = {"rgb": [0.1, 0.7, 0.2], "extent_cm": [11.5, 6.36, 6.36], "fill": 0.785, "mass_g": 420.0}
+    assert exp.predict(green_heavy_cylinder).tolist() == pytest.approx([365.3] * 4, rel=0.02)
+    assert exp.final_knowledge()[0]["color"]["state"] == "irrelevant"
+    assert exp.final_knowledge()[0]["weight"]["state"] == "dominant"
