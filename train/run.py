@@ -108,50 +108,23 @@ def main(argv=None) -> int:
 def run(args, exp: Experiment, objects, resumed: bool) -> int:
     import torch
 
-    from sim.world import World
-    # small tensors (a few agents, IK of one arm) run faster on one thread than on two fighting each other;
-    # a large population's big tensors use both cores
-    torch.set_num_threads(1 if len(exp.orders) <= 256 else 2)
-    from train.tensorboard_log import OrderLog
-
-    out = args.out
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.time()
-    world = None
-
-    def get_world():
-        nonlocal world
-        if world is None:
-            world = World(objects, gui=args.gui, seed=args.seed)
-        return world
-
-    frames_dir = out / "frames" if args.frames else None
-    specs = {o.name: o for o in objects.train + objects.probe}
-
-    def simulate(name: str, tag: str) -> dict:
-        outcome = get_world().run_episode(name, record=frames_dir is not None)
-        if frames_dir is not None and outcome.frames:
-            from sim.episode import save_frames_png
-            save_frames_png(outcome.frames, frames_dir / tag)
-            for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
-                logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
-        return outcome_record(outcome)
-
-    def world_episode(name: str, b: int, t: int) -> dict:
-        if exp.physics == "per-episode":
-            return simulate(name, f"order{b + 1:02d}_ep{t + 1:02d}_{name}")
-        if name not in exp.outcomes:
-            exp.outcomes[name] = simulate(name, name)
-        return exp.outcomes[name]
-
     from sim.objects import archimedes_cm3
-    for name in exp.probe_names:
-        if name not in exp.probes:
-            exp.probes[name] = {"measurement": plain_measurement(get_world().inspect(name)),
-                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
+    from train.physics import Physics
+    from train.tensorboard_log import OrderLog
+    # small tensors (a few agents) run faster on one thread than on two fighting each other; a large population's
+    # big tensors use both cores
+    torch.set_num_threads(1 if len(exp.orders) <= 256 else 2)
 
+    out, t0 = args.out, time.time()
+    ckpt = out / "checkpoints" / "latest.pt"
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
+
+    def checkpoint():
+        save_atomic({"run": run_meta, "experiment": exp.state_dict()}, ckpt)
+
+    if not resumed:
+        checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
     logs = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
@@ -160,6 +133,31 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
         for b, log in enumerate(logs):
             log.hparams({**hp, "order": " ".join(exp.train_names[i] for i in exp.orders[b])},
                         {"prediction/probe_rel_error": float("nan")})
+
+    physics = Physics(objects, seed=args.seed, gui=args.gui)
+    specs = {o.name: o for o in objects.train + objects.probe}
+
+    def keep(outcome, tag: str) -> dict:
+        if args.frames and outcome.frames:
+            from sim.episode import save_frames_png
+            save_frames_png(outcome.frames, out / "frames" / tag)
+            for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
+                logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
+        return outcome_record(outcome)
+
+    # probes are inspected once; with cached physics every distinct train object is dropped once, all up front
+    todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
+    probes = [n for n in exp.probe_names if n not in exp.probes]
+    if todo or probes:
+        print(f"simulating {len(todo)} drop(s) and {len(probes)} probe inspection(s) on {physics.workers} "
+              f"process(es)", flush=True)
+        results = physics.run([("drop", n, args.frames) for n in todo] + [("inspect", n, None) for n in probes])
+        for name, outcome in zip(todo, results):
+            exp.outcomes[name] = keep(outcome, name)
+        for name, m in zip(probes, results[len(todo):]):
+            exp.probes[name] = {"measurement": plain_measurement(m),
+                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
+        checkpoint()
     print(f"{'resuming' if resumed else 'running'}: {len(exp.orders)} order(s) x {exp.n_episodes} episodes, "
           f"physics {exp.physics}" + (" (each distinct object simulated once, its measured outcome reused by "
                                        "every order: the jar is reset between episodes)" if exp.physics == "cached"
@@ -167,11 +165,18 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
     progress = Progress(exp.n_episodes)
     while not exp.done:
         t = exp.t
-        recs = exp.step(world_episode)
+        if exp.physics == "per-episode":
+            names = [exp.train_names[o[t]] for o in exp.orders]
+            fresh = [keep(o, f"order{b + 1:02d}_ep{t + 1:02d}_{n}")
+                     for b, (n, o) in enumerate(zip(names, physics.drops(names, args.frames)))]
+            recs = exp.step(lambda name, b, t: fresh[b])
+        else:
+            recs = exp.step(lambda name, b, t: exp.outcomes[name])
         for b, log in enumerate(logs):
             log.episode(t, recs[b])
-        save_atomic({"run": run_meta, "experiment": exp.state_dict()}, out / "checkpoints" / "latest.pt")
+        checkpoint()
         progress.update(exp.t, recs[0]["object"], recs[0]["rules"])
+    physics.close()
 
     summary = build_summary(exp)
     from train.figures import figure2
@@ -181,10 +186,8 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
         log.writer.add_figure("figure2", fig, exp.n_episodes)
         log.close()
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
-    if world is not None:
-        world.close()
     print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
-          f"checkpoints/latest.pt" + (", frames/" if frames_dir else "") + f"  [{time.time() - t0:.1f} s]")
+          f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
     return 0
 

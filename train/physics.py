@@ -1,0 +1,70 @@
+"""The runner's access to the simulated world: drops and inspections, spread over worker processes.
+
+Every drop and every inspection rebuilds the scene from scratch and seeds its sensor noise from (seed, object name)
+(sim/world.py), so an object's outcome is the same bit for bit whichever process simulates it and whatever it
+simulated before. That makes the physics embarrassingly parallel: the profile of a default run showed the drops
+and inspections (13 independent simulations) taking 9 of its 12 s, so they run on every core at once.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+
+_WORLD = None  # one World per worker process
+
+
+def _init(objects, seed: int) -> None:
+    global _WORLD
+    import torch
+
+    torch.set_num_threads(1)  # one process per core
+    from sim.world import World
+    _WORLD = World(objects, seed=seed)
+
+
+def _task(job: tuple):
+    kind, name, record = job
+    if kind == "inspect":
+        return _WORLD.inspect(name)
+    return _WORLD.run_episode(name, record=record)
+
+
+class Physics:
+    """Drops and inspections for the runner. workers=1 (or a GUI) simulates in this process."""
+
+    def __init__(self, objects, seed: int = 0, gui: bool = False, workers: int | None = None):
+        self.objects, self.seed, self.gui = objects, seed, gui
+        self.workers = 1 if gui else (workers or os.cpu_count() or 1)
+        self._pool = None
+
+    def run(self, jobs: list[tuple]) -> list:
+        """jobs: ("drop", name, record) or ("inspect", name, None); results in the same order."""
+        if not jobs:
+            return []
+        if self.workers == 1 or len(jobs) == 1:
+            global _WORLD
+            if _WORLD is None:
+                from sim.world import World
+                _WORLD = World(self.objects, gui=self.gui, seed=self.seed)
+            return [_task(j) for j in jobs]
+        if self._pool is None:
+            ctx = mp.get_context("spawn")  # a fresh interpreter: no pybullet client or torch threads inherited
+            self._pool = ctx.Pool(min(self.workers, len(jobs)), initializer=_init, initargs=(self.objects, self.seed))
+        return self._pool.map(_task, jobs, chunksize=1)
+
+    def drops(self, names: list[str], record: bool = False) -> list:
+        return self.run([("drop", n, record) for n in names])
+
+    def inspections(self, names: list[str]) -> list[dict]:
+        return self.run([("inspect", n, None) for n in names])
+
+    def close(self) -> None:
+        global _WORLD
+        if self._pool is not None:
+            self._pool.close()
+            self._pool.join()
+            self._pool = None
+        if _WORLD is not None:
+            _WORLD.close()
+            _WORLD = None
