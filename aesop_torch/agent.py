@@ -26,7 +26,7 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
-from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
+from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, train_property_maps
 from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
 from .rules import ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, contradiction

@@ -162,8 +162,9 @@ class ObjectHub(nn.Module):
     def allocate(self, winners: torch.Tensor, present: torch.Tensor, mask: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:
         """One-shot storage of a new object for the agents in mask (B,). winners (B, P) long map winners,
-        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by an optional
-        generator, else to the lower index), sets W[b, m, winner_m, k] = 1 for every present map m and assembly neuron k.
+        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by an
+        optional generator, else to the lower index), sets W[b, m, winner_m, k] = 1 for every present map m and
+        assembly neuron k.
         Returns the new assemblies (B, N) bool (empty where mask is False)."""
         B, P, U, N = self.W.shape
         if winners.shape != (B, P) or present.shape != (B, P) or mask.shape != (B,):

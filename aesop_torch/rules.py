@@ -107,7 +107,8 @@ class CausalRules(nn.Module):
         # does not confound), or the only change at all (then the earlier Elimination was wrong)
         suspects = dp & (self.state != IRRELEVANT)
         n_suspects = suspects.sum(-1, keepdim=True)
-        clean = (fired == GROWTH) & ((suspects & (n_suspects == 1)) | ((n_suspects == 0) & (dp.sum(-1, keepdim=True) == 1)))
+        alone = (suspects & (n_suspects == 1)) | ((n_suspects == 0) & (dp.sum(-1, keepdim=True) == 1))
+        clean = (fired == GROWTH) & alone
         proven = self.proven
         new = self.state.clone()
         # Precedence: clean Growth > Elimination > ambiguous Growth > Uncertainty > unknown.

@@ -144,7 +144,7 @@ def main():
             print(f"{n:>6} {ex:>6.3f} {hz:>13.3f} {hr:>11.3f} {hf:>9.3f} {bits:>11.3f}", flush=True)
         else:
             print(f"{n:>6} {ex:>6.3f} {'-':>13} {'-':>11} {'-':>9} {'-':>11}", flush=True)
-    print(f"(ours: stored at random, all 20 rows used; '-': peer not run, 0 exact at the two counts before)")
+    print("(ours: stored at random, all 20 rows used; '-': peer not run, 0 exact at the two counts before)")
     print(f"random-episode section {time.perf_counter() - t0:.0f} s")
     for n, ex in rows:  # the largest count before the first one below 99 %
         if ex < 0.99:

@@ -30,16 +30,16 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import sys
 import tempfile
 import xml.etree.ElementTree as ET
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pybullet as p
 import torch
+
+from sim.quiet import quiet_c_output  # noqa: F401  (re-exported: the world uses it)
 
 ROBOT_MODEL = "iCubGazeboV2_5"
 ROOT_LINK = "root_link"
@@ -205,24 +205,6 @@ def palm_offset(urdf_path: Path | None = None) -> tuple[tuple, tuple]:
             xyz = tuple(_floats(origin.get("xyz"), 3))
             return xyz, tuple(p.getQuaternionFromEuler(_floats(origin.get("rpy"), 3)))
     raise ValueError(f"no joint with child link {HAND_LINK} in the URDF")
-
-
-@contextmanager
-def quiet_c_output():
-    """Silence C-level stdout/stderr (pybullet's b3Warning / merge chatter) by pointing fds 1 and 2 at /dev/null."""
-    sys.stdout.flush()
-    sys.stderr.flush()
-    saved = os.dup(1), os.dup(2)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, 1)
-        os.dup2(devnull, 2)
-        yield
-    finally:
-        os.dup2(saved[0], 1)
-        os.dup2(saved[1], 2)
-        for fd in (*saved, devnull):
-            os.close(fd)
 
 
 # ------------------------------------------------------------------------------------------------------ Robot

@@ -44,11 +44,11 @@ def build_summary(exp) -> dict:
 
 def knowledge_table(summary: dict) -> str:
     runs = summary["runs"]
-    lines = [f"{'order':<7}" + "".join(f"{p:<20}" for p in PROPERTIES) + "probe error first -> last"]
+    lines = [f"{'order':<7}" + "".join(f"{p:<26}" for p in PROPERTIES) + "probe error first -> last"]
     for i, run in enumerate(runs[:12]):
         errs = [e["probe_rel_error"] for e in run["episodes"] if e["probe_rel_error"] is not None]
         err = f"{100 * errs[0]:.1f}% -> {100 * errs[-1]:.1f}%" if errs else "n/a"
-        cells = "".join(f"{k['state']} ({k['certainty']:.2f})".ljust(20)
+        cells = "".join(f"{k['state']} ({k['certainty']:.2f})".ljust(26)
                         for k in (run["final_knowledge"][p] for p in PROPERTIES))
         lines.append(f"{i + 1:<7}{cells}{err}")
     if len(runs) > 12:
