@@ -103,3 +103,13 @@ def test_agents_in_a_batch_are_independent():
     fresh = CausalRules(batch=2)
     fresh.load_state_dict(state)
     assert torch.equal(fresh.state, rules.state) and torch.equal(fresh.proven, rules.proven)
+
+
+def test_a_known_irrelevant_change_does_not_make_growth_ambiguous():
+    rules = CausalRules()
+    fire(rules, dp(C), False)                 # colour eliminated
+    assert fire(rules, dp(C, W), True) == ["GUUG"]
+    assert bool(rules.proven[0, W]) and not bool(rules.proven[0, C])
+    assert rules.state[0, C] == IRRELEVANT    # Growth cannot revive an eliminated property
+    fire(rules, dp(W), False)                 # a later null result on weight cannot overturn clean dominance
+    assert rules.state[0, W] == DOMINANT
