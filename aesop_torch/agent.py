@@ -209,3 +209,33 @@ class Agent(nn.Module):
 
     def knowledge(self, b: int = 0) -> dict:
         return self.rules.knowledge(b)
+
+    @torch.no_grad()
+    def select(self, index) -> "Agent":
+        """A new Agent of batch len(index) whose agent i is a copy of this one's agent index[i] (repeats allowed).
+
+        Lets a population branch: agents that saw the same first objects are one agent until their orders differ.
+        The learned per-agent state (hub, memory, rules: every persistent buffer, all batch-first) is copied; the
+        property maps and the lateral spread are frozen after development, so they are shared, not retrained."""
+        index = torch.as_tensor(index)
+        if index.ndim != 1 or index.numel() == 0 or index.dtype in (torch.bool, torch.float32, torch.float64):
+            raise ValueError(f"index must be a non-empty 1-d integer sequence, got shape {tuple(index.shape)} "
+                             f"dtype {index.dtype}")
+        if int(index.min()) < 0 or int(index.max()) >= self.batch:
+            raise ValueError(f"index out of range 0..{self.batch - 1}: min {int(index.min())}, max {int(index.max())}")
+        new = Agent.__new__(Agent)
+        nn.Module.__init__(new)
+        new.config, new.batch, new.properties = self.config, index.numel(), self.properties
+        new.encoder, new.maps = self.encoder, self.maps
+        new.actions, new.body, new.reward = self.actions, self.body, self.reward
+        new.register_buffer("lateral", self.lateral, persistent=False)
+        sizes = {name: m.weights.shape[0] for name, m in self.maps.items()}
+        new.hub = ObjectHub(sizes, self.config.hub, batch=1).to(self.hub.W.device)
+        new.memory = EpisodicMemory(self.config.memory, batch=1).to(self.hub.W.device)
+        new.rules = CausalRules(self.config.rules, batch=1, properties=self.properties).to(self.hub.W.device)
+        for name in ("hub", "memory", "rules"):
+            old, part = getattr(self, name), getattr(new, name)
+            part.batch = new.batch if hasattr(part, "batch") else None
+            for key in old.state_dict():   # persistent buffers: exactly the batch-first learned state
+                setattr(part, key, getattr(old, key)[index.to(getattr(old, key).device)])
+        return new

@@ -22,7 +22,7 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
 from train.checkpoint import load, save_atomic, write_text_atomic  # noqa: E402
 from train.experiment import Experiment, draw_orders, outcome_record, plain_measurement  # noqa: E402
 from train.progress import Progress  # noqa: E402
-from train.summary import build_summary, knowledge_table  # noqa: E402
+from train.summary import FULL_RUNS, build_summary, knowledge_table  # noqa: E402
 
 DEFAULT_OBJECTS = Path(__file__).resolve().parents[1] / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
@@ -92,7 +92,13 @@ def prepare(args):
     if args.out.exists() and any(args.out.iterdir()):
         raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
     orders = draw_orders(len(train_names), args.orders, args.seed)
-    return Experiment(train_names, probe_names, orders, seed=args.seed, physics=args.physics), objects, False
+    if len(orders) > FULL_RUNS and args.physics == "per-episode":
+        raise UsageError(f"--physics per-episode with {len(orders)} orders would simulate "
+                         f"{len(orders) * len(train_names)} drops; more than {FULL_RUNS} orders run as a population "
+                         "on cached physics")
+    # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
+    detailed = orders[:FULL_RUNS]
+    return Experiment(train_names, probe_names, detailed, seed=args.seed, physics=args.physics), objects, False
 
 
 def main(argv=None) -> int:
@@ -178,7 +184,15 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
         progress.update(exp.t, recs[0]["object"], recs[0]["rules"])
     physics.close()
 
-    summary = build_summary(exp)
+    population = None
+    orders = draw_orders(len(exp.train_names), args.orders, args.seed)
+    if len(orders) > len(exp.orders):
+        from train.population import run_population
+        print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in detail)",
+              flush=True)
+        population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
+                                    exp.config)
+    summary = build_summary(exp, population)
     from train.figures import figure2
     fig = figure2(exp.records)
     fig.savefig(out / "figure2.png", dpi=110)

@@ -1,9 +1,9 @@
 """summary.json (SPEC.md contract) and the short table the runner prints at the end.
 
 For large populations (more than FULL_RUNS orders) `runs` keeps the full episode records of the first FULL_RUNS
-orders only, and a compact `population` block covers every order: its final knowledge (one letter per property:
-U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error, and the fraction of orders that
-agree with the most common final knowledge. `order_independent` is always computed over every order.
+orders only (the runner runs those in detail), and a compact `population` block covers every order: its final
+knowledge (one letter per property: U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error,
+and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed over every order.
 """
 
 from __future__ import annotations
@@ -19,25 +19,25 @@ def knowledge_key(k: dict) -> str:
     return "".join("ULDI"[STATES.index(k[p]["state"])] for p in PROPERTIES)
 
 
-def build_summary(exp) -> dict:
+def build_summary(exp, population: dict | None = None) -> dict:
+    """exp: the Experiment run in detail (at most FULL_RUNS orders); population: train.population's result for
+    every order when there are more."""
     names = exp.train_names
     finals = exp.final_knowledge()
-    runs = []
-    for b in range(min(len(exp.orders), FULL_RUNS)):
-        runs.append({"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b],
-                     "final_knowledge": finals[b]})
-    keys = [knowledge_key(k) for k in finals]
+    runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b]}
+            for b in range(len(exp.orders))]
+    keys = population["final_knowledge"] if population else [knowledge_key(k) for k in finals]
     summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": len(set(keys)) == 1}
-    if len(exp.orders) > FULL_RUNS:
+    if population:
         common, n = Counter(keys).most_common(1)[0]
         summary["population"] = {
-            "orders": len(exp.orders),
+            "orders": len(keys),
             "key": "one letter per property (" + ", ".join(PROPERTIES)
                    + "): U unknown, L likely irrelevant, D dominant, I irrelevant",
             "most_common_knowledge": common,
             "agree_fraction": n / len(keys),
             "final_knowledge": keys,
-            "final_probe_rel_error": [exp.records[b][-1]["probe_rel_error"] for b in range(len(exp.orders))],
+            "final_probe_rel_error": population["final_probe_rel_error"],
         }
     return summary
 
