@@ -218,7 +218,7 @@ class Agent(nn.Module):
         The learned per-agent state (hub, memory, rules: every persistent buffer, all batch-first) is copied; the
         property maps and the lateral spread are frozen after development, so they are shared, not retrained."""
         index = torch.as_tensor(index)
-        if index.ndim != 1 or index.numel() == 0 or index.dtype in (torch.bool, torch.float32, torch.float64):
+        if index.ndim != 1 or index.numel() == 0 or index.is_floating_point() or index.dtype == torch.bool:
             raise ValueError(f"index must be a non-empty 1-d integer sequence, got shape {tuple(index.shape)} "
                              f"dtype {index.dtype}")
         if int(index.min()) < 0 or int(index.max()) >= self.batch:
@@ -230,12 +230,14 @@ class Agent(nn.Module):
         new.actions, new.body, new.reward = self.actions, self.body, self.reward
         new.register_buffer("lateral", self.lateral, persistent=False)
         sizes = {name: m.weights.shape[0] for name, m in self.maps.items()}
-        new.hub = ObjectHub(sizes, self.config.hub, batch=1).to(self.hub.W.device)
-        new.memory = EpisodicMemory(self.config.memory, batch=1).to(self.hub.W.device)
-        new.rules = CausalRules(self.config.rules, batch=1, properties=self.properties).to(self.hub.W.device)
+        # the parts keep their types (a subclass, e.g. a memory with a different recall schedule, stays one)
+        new.hub = type(self.hub)(sizes, self.config.hub, batch=1).to(self.hub.W.device)
+        new.memory = type(self.memory)(self.config.memory, batch=1).to(self.hub.W.device)
+        new.rules = type(self.rules)(self.config.rules, batch=1, properties=self.properties).to(self.hub.W.device)
         for name in ("hub", "memory", "rules"):
             old, part = getattr(self, name), getattr(new, name)
-            part.batch = new.batch if hasattr(part, "batch") else None
+            if hasattr(part, "batch"):
+                part.batch = new.batch
             for key in old.state_dict():   # persistent buffers: exactly the batch-first learned state
                 setattr(part, key, getattr(old, key)[index.to(getattr(old, key).device)])
         return new

@@ -1,0 +1,218 @@
+"""train.population: every order at once (prefix sharing, shared recall) gives what Experiment gives order by order.
+
+Closed-form outcomes (Archimedes, no physics), as a cached-physics run would record them.
+"""
+
+import itertools
+import statistics
+from collections import Counter
+
+import pytest
+import torch
+
+from aesop_torch.agent import Agent, AgentConfig
+from aesop_torch.memory import EpisodicMemory, MemoryConfig
+from sim.objects import DEFAULT_OBJECTS_FILE, archimedes_cm3, load_objects
+from train.experiment import Experiment, draw_orders, median_rel_error
+from train.population import RecallCache, SharedRecallMemory, _row_keys, agreement, median_rel_errors, run_population
+from train.summary import knowledge_key
+
+# five of the default objects whose 120 orders end in three different kinds of knowledge (54 / 36 / 30 orders), so
+# agreement between the two runs is not agreement on one answer
+MIXED = ("red_heavy_cylinder", "blue_heavy_cylinder", "red_light_cylinder", "yellow_light_sphere", "green_light_box")
+
+
+def measurement(spec):
+    return {"rgb": list(spec.rgb), "extent_cm": [float(x) for x in spec.extent_cm], "fill": float(spec.fill),
+            "mass_g": float(spec.mass_g)}
+
+
+@pytest.fixture(scope="module")
+def world():
+    objs = load_objects(DEFAULT_OBJECTS_FILE)
+    outcomes = {}
+    for s in objs.train:
+        v = archimedes_cm3(s, objs.jar)
+        outcomes[s.name] = {"measurement": measurement(s), "observed_cm3": v, "archimedes_cm3": v,
+                            "goal_before": False, "goal_after": v > 200}
+    probes = {p.name: {"measurement": measurement(p), "archimedes_cm3": archimedes_cm3(p, objs.jar)}
+              for p in objs.probe}
+    return [s.name for s in objs.train], [p.name for p in objs.probe], outcomes, probes
+
+
+def experiment(names, probe_names, orders, outcomes, probes):
+    exp = Experiment(list(names), probe_names, orders)
+    exp.probes = probes
+    while not exp.done:
+        exp.step(lambda name, b, t: outcomes[name])
+    return exp
+
+
+def assert_same_as_experiment(pop, exp):
+    keys = [knowledge_key(k) for k in exp.final_knowledge()]
+    assert pop["final_knowledge"] == keys
+    want = exp.probe_predictions()
+    got = pop["final_probe_cm3"]
+    assert torch.equal(torch.isnan(got), torch.isnan(want))
+    # float rounding only: an agent's float results depend in their last bits on the batch it is computed in
+    assert torch.allclose(torch.nan_to_num(got), torch.nan_to_num(want), rtol=1e-5, atol=0)
+    errs = [r[-1]["probe_rel_error"] for r in exp.records]
+    for a, b in zip(pop["final_probe_rel_error"], errs):
+        assert (a is None) == (b is None) and (a is None or abs(a - b) <= 1e-4)
+    common, n = Counter(keys).most_common(1)[0]
+    assert pop["most_common_knowledge"] == common and pop["agree_fraction"] == n / len(keys)
+
+
+@pytest.fixture(scope="module")
+def mixed(world):
+    _, probe_names, outcomes, probes = world
+    names = list(MIXED)
+    orders = [list(p) for p in itertools.permutations(range(len(names)))]
+    exp = experiment(names, probe_names, orders, outcomes, probes)
+    # chunk 7: every level above the first is split into pieces, and the last level's only children reuse parents
+    pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=7, threads=1)
+    return exp, pop, names, orders
+
+
+def test_all_orders_of_five_match_experiment(mixed):
+    exp, pop, _, _ = mixed
+    assert_same_as_experiment(pop, exp)
+    assert len(set(pop["final_knowledge"])) == 3          # the comparison covers disagreeing orders
+    assert pop["nodes_per_level"] == [5, 20, 60, 120, 120]
+    assert pop["agent_steps"] == 5 + 20 + 60 + 120 + 120   # one step per trie node, not 5 x 120
+
+
+def test_subset_with_a_repeated_order_matches_experiment(world):
+    """A trie over any given orders: random ones, one given twice (same leaf, reported for both)."""
+    train, probe_names, outcomes, probes = world
+    names = train[:6]
+    orders = draw_orders(len(names), "20", seed=3)
+    orders.append(list(orders[4]))
+    exp = experiment(names, probe_names, orders, outcomes, probes)
+    pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=4, threads=1)
+    assert_same_as_experiment(pop, exp)
+    assert pop["final_knowledge"][-1] == pop["final_knowledge"][4]
+
+
+def test_same_inputs_same_outputs_bit_for_bit(world, mixed):
+    exp, pop, names, orders = mixed
+    _, probe_names, outcomes, probes = world
+    again = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=7, threads=1)
+    assert again["final_knowledge"] == pop["final_knowledge"]
+    assert again["final_probe_rel_error"] == pop["final_probe_rel_error"]
+    assert torch.equal(again["final_probe_cm3"].nan_to_num(-1.0), pop["final_probe_cm3"].nan_to_num(-1.0))
+
+
+def test_agreement_on_a_hand_made_case():
+    common, fraction, counts = agreement(["IIDD", "ILDD", "IIDD", "UUUU", "IIDD", "ILDD"])
+    assert (common, fraction) == ("IIDD", 0.5)
+    assert counts == {"IIDD": 3, "ILDD": 2, "UUUU": 1}
+    assert agreement(["ILDD", "IIDD"])[:2] == ("ILDD", 0.5)   # a tie goes to the key seen first
+    with pytest.raises(ValueError):
+        agreement([])
+
+
+def test_agree_fraction_of_the_mixed_set(mixed):
+    """The 120 orders of MIXED: 54 end IDLD, 36 ILLD, 30 IDDD (counted from Experiment's own knowledge)."""
+    exp, pop, _, _ = mixed
+    assert Counter(knowledge_key(k) for k in exp.final_knowledge()) == {"IDLD": 54, "ILLD": 36, "IDDD": 30}
+    assert pop["most_common_knowledge"] == "IDLD"
+    assert pop["agree_fraction"] == 54 / 120
+    assert pop["knowledge_counts"] == {"IDLD": 54, "ILLD": 36, "IDDD": 30}
+
+
+def test_median_rel_errors_is_median_rel_error_row_by_row():
+    truth = torch.tensor([100.0, 20.0, 50.0, 10.0])
+    nan = float("nan")
+    pred = torch.tensor([[110.0, 20.0, 40.0, 10.0],     # errors .1 0 .2 0 -> median (0 + .1) / 2
+                         [nan, 30.0, 50.0, 12.5],       # 1 (nothing expected) .5 0 .25
+                         [nan, nan, nan, nan]])         # no prediction at all: None
+    got = median_rel_errors(pred, truth)
+    assert got == [median_rel_error(p, truth) for p in pred]
+    assert got[0] == pytest.approx(0.05) and got[1] == pytest.approx(0.375) and got[2] is None
+    odd = median_rel_errors(pred[:, :3], truth[:3])
+    assert odd == [median_rel_error(p, truth[:3]) for p in pred[:, :3]]
+    assert odd[0] == pytest.approx(statistics.median([0.1, 0.0, 0.2]))
+
+
+def test_row_keys_are_exact_bytes():
+    a = torch.tensor([[1, 2], [3, 4], [1, 2]])
+    flags = torch.tensor([[True] * 9, [True] * 9, [True] * 8 + [False]])   # packed 8 to a byte, the 9th counts
+    keys = _row_keys(a)
+    assert keys[0] == keys[2] != keys[1]
+    keys = _row_keys(a, flags)
+    assert len(set(keys)) == 3
+    assert _row_keys(torch.tensor([[0.0], [-0.0]]))[0] != _row_keys(torch.tensor([[0.0], [-0.0]]))[1]
+
+
+def sheet(code: int, cfg: MemoryConfig) -> torch.Tensor:
+    """A valid episode: object row neurons code..code+4, every other row neurons 2 code, 2 code + 1."""
+    x = torch.zeros(cfg.rows, cfg.cols, dtype=torch.bool)
+    for r in range(cfg.rows):
+        k = cfg.row_k[r]
+        x[r, (code * k) % cfg.cols:(code * k) % cfg.cols + k] = True
+    return x
+
+
+def test_shared_recall_recalls_each_distinct_memory_and_cue_once():
+    """Four agents, two memories (A: episodes 1 and 3, B: episode 2), cues on episode 1 or 2: three distinct pairs."""
+    cfg = MemoryConfig(max_episodes=2)
+    plain, shared = EpisodicMemory(cfg, batch=4), SharedRecallMemory(cfg, batch=4)
+    shared.cache = RecallCache()
+    for mem in (plain, shared):
+        mem.store(torch.stack([sheet(1, cfg), sheet(2, cfg), sheet(1, cfg), sheet(1, cfg)]))
+        mem.store(torch.stack([sheet(3, cfg)] * 4), torch.tensor([True, False, True, True]))
+    cue = torch.stack([sheet(c, cfg)[cfg.object_row].float() for c in (1, 2, 1, 2)])
+    want, got = plain.recall(cue), shared.recall(cue)
+    assert shared.cache.size == 3                  # (A, cue 1) twice, (B, cue 2), (A, cue 2)
+    assert torch.equal(got.episodes, want.episodes) and torch.equal(got.valid, want.valid)
+    assert torch.allclose(got.strength, want.strength)
+    assert torch.equal(got.episodes[0, 0], sheet(1, cfg)) and torch.equal(got.episodes[1, 0], sheet(2, cfg))
+    again = shared.recall(cue)                     # everything is in the cache now
+    assert shared.cache.size == 3 and torch.equal(again.episodes, got.episodes)
+    assert torch.equal(again.strength, got.strength)
+
+
+def test_select_copies_the_chosen_agents(world):
+    train, _, outcomes, _ = world
+    agent = Agent(AgentConfig(), batch=3)
+    m = {k: torch.tensor([outcomes[train[i]]["measurement"][k] for i in (0, 2, 4)]) for k in
+         ("rgb", "extent_cm", "fill", "mass_g")}
+    agent.step(m, torch.tensor([365.0, 14.0, 60.0]), torch.zeros(3, dtype=torch.bool), torch.zeros(3, dtype=torch.bool))
+    picked = agent.select([2, 0, 2])
+    assert picked.batch == 3 and picked.memory.batch == 3 and picked.maps is agent.maps
+    for part in ("hub", "memory", "rules"):
+        for name, buf in getattr(agent, part).state_dict().items():
+            assert torch.equal(getattr(getattr(picked, part), name), buf[[2, 0, 2]]), (part, name)
+    before = agent.hub.W.clone()
+    picked.hub.W.zero_()                                   # copies, not views
+    assert torch.equal(agent.hub.W, before)
+    with pytest.raises(ValueError):
+        agent.select([3])
+    with pytest.raises(ValueError):
+        agent.select([])
+
+
+def test_bad_input_is_refused(world):
+    train, probe_names, outcomes, probes = world
+    names = train[:3]
+    cfg = AgentConfig()
+    with pytest.raises(ValueError, match="every order"):
+        run_population(names, probe_names, [[0, 1]], outcomes, probes, cfg)
+    with pytest.raises(ValueError, match="index"):
+        run_population(names, probe_names, [[0, 1, 3]], outcomes, probes, cfg)
+    with pytest.raises(ValueError, match="no outcome"):
+        run_population(names + ["ghost"], probe_names, [[0, 1, 2, 3]], outcomes, probes, cfg)
+    with pytest.raises(ValueError, match="chunk"):
+        run_population(names, probe_names, [[0, 1, 2]], outcomes, probes, cfg, chunk=0)
+
+
+def test_config_threads_and_progress(world):
+    train, probe_names, outcomes, probes = world
+    cfg, seen = AgentConfig(), []
+    threads = torch.get_num_threads()
+    pop = run_population(train[:3], probe_names, [[0, 1, 2], [2, 1, 0]], outcomes, probes, cfg, chunk=1,
+                         progress=lambda done, total: seen.append((done, total)), threads=2)
+    assert cfg.memory.max_episodes == 230 and cfg.hub.max_assemblies == 230   # the caller's config is not touched
+    assert torch.get_num_threads() == threads
+    assert seen == [(1, 2), (2, 2)] and pop["orders"] == 2
