@@ -154,3 +154,40 @@ def test_shipped_default_checkpoint_predicts_as_the_readme_says():
     assert exp.predict(green_heavy_cylinder).tolist() == pytest.approx([365.3] * 4, rel=0.02)
     assert exp.final_knowledge()[0]["color"]["state"] == "irrelevant"
     assert exp.final_knowledge()[0]["weight"]["state"] == "dominant"
+
+
+def test_more_orders_than_full_records_run_as_a_population(paper_file, tmp_path):
+    out = tmp_path / "pop"
+    r = subprocess.run(runner("--objects", str(paper_file), "--orders", "70", "--out", str(out)),
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    from train.experiment import draw_orders
+    from train.summary import FULL_RUNS, knowledge_key
+    orders = draw_orders(3, "70", seed=0)
+    names = [o["name"] for o in PAPER["train"]]
+    # the first FULL_RUNS orders in full detail, every order in the compact block
+    assert [run["order"] for run in summary["runs"]] == [[names[i] for i in o] for o in orders[:FULL_RUNS]]
+    pop = summary["population"]
+    assert pop["orders"] == 70 and len(pop["final_knowledge"]) == len(pop["final_probe_rel_error"]) == 70
+    # the population's agents end where the detailed ones do, order by order
+    assert pop["final_knowledge"][:FULL_RUNS] == [knowledge_key(run["final_knowledge"]) for run in summary["runs"]]
+    for err, run in zip(pop["final_probe_rel_error"], summary["runs"]):
+        assert err == pytest.approx(run["episodes"][-1]["probe_rel_error"], abs=1e-4)
+    # an order's knowledge depends on its order: the same order, the same key, wherever it comes
+    by_order = {}
+    for o, key in zip(orders, pop["final_knowledge"]):
+        assert by_order.setdefault(tuple(o), key) == key
+    common = max(set(pop["final_knowledge"]), key=pop["final_knowledge"].count)
+    assert pop["most_common_knowledge"] == common
+    assert pop["agree_fraction"] == pop["final_knowledge"].count(common) / 70
+    assert summary["order_independent"] == (len(set(pop["final_knowledge"])) == 1)
+    assert "population: 70 orders" in r.stdout
+
+
+def test_per_episode_physics_for_a_population_is_refused_before_anything_is_written(paper_file, tmp_path):
+    out = tmp_path / "refused"
+    r = subprocess.run(runner("--objects", str(paper_file), "--orders", "70", "--physics", "per-episode",
+                              "--out", str(out)), capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "per-episode" in r.stderr
+    assert not out.exists()
