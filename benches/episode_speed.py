@@ -14,6 +14,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from sim.world import World  # noqa: E402
+from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 
 def main():
@@ -40,4 +41,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with recorded("episode_speed"):
+        main()

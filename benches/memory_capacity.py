@@ -20,6 +20,7 @@ import time
 import torch
 
 from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners
+from record import recorded   # benches/record.py: keeps BENCHMARKS.md current
 
 R, C, OBJ, N = 20, 50, 1, 1000
 COUNTS = list(range(25, 501, 25))
@@ -183,4 +184,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with recorded("memory_capacity"):
+        main()

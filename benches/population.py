@@ -25,6 +25,7 @@ from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, archimedes_cm3, load_objects  # noqa: E402
 from train.experiment import draw_orders  # noqa: E402
 from train.population import run_population  # noqa: E402
+from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 POPULATIONS = ("1", "100", "10000", "all")
 
@@ -81,4 +82,5 @@ def main():
 
 
 if __name__ == "__main__":
-    main()
+    with recorded("population"):
+        main()

@@ -23,6 +23,7 @@ import torch
 
 from sim.kinematics import ArmKinematics
 from sim.robot import HAND_PARENT_LINK, load_icub, quiet_c_output
+from record import recorded   # benches/record.py: keeps BENCHMARKS.md current
 
 N_TARGETS = 1000
 # Root frame (x backward, y right, z up): 15-45 cm in front, 15 cm left to 40 cm right, 20 cm below to 30 cm above
@@ -130,4 +131,5 @@ def fk_check(kin: ArmKinematics, q: torch.Tensor, tgt: torch.Tensor, tol: float)
 
 
 if __name__ == "__main__":
-    main()
+    with recorded("reach_speed"):
+        main()

@@ -14,6 +14,7 @@ import numpy as np
 import torch
 
 from aesop_torch.som import SelfOrganizingMap, SOMConfig
+from record import recorded   # benches/record.py: keeps BENCHMARKS.md current
 
 try:
     from minisom import MiniSom
@@ -63,6 +64,7 @@ def run(side: int):
     return t_peer / t_ours
 
 
-run(10)
-speedup = run(30)
-print(f"som_speedup_vs_minisom={speedup:.1f}")
+if __name__ == "__main__":
+    with recorded("som_vs_minisom"):
+        run(10)
+        print(f"som_speedup_vs_minisom={run(30):.1f}")

@@ -93,6 +93,7 @@ def test_tensorboard_tags_and_values(paper_run):
             assert f"rules/{p}/{r}" in tags
     assert {"prediction/abs_error_cm3", "prediction/probe_rel_error"} <= tags
     assert any(t.startswith("episodes") for t in tags)
+    assert [e.step for e in acc.Images("figure2")] == [3]   # Figure 2, once, at the last episode
 
     def series(tag):
         return {e.step: e.value for e in acc.Scalars(tag)}

@@ -62,7 +62,7 @@ class Physics:
     def close(self) -> None:
         global _WORLD
         if self._pool is not None:
-            self._pool.close()
+            self._pool.terminate()   # every result is in: the idle workers need no orderly shutdown (0.4 s)
             self._pool.join()
             self._pool = None
         if _WORLD is not None:

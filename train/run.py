@@ -196,8 +196,10 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
     from train.figures import figure2
     fig = figure2(exp.records)
     fig.savefig(out / "figure2.png", dpi=110)
+    from torch.utils.tensorboard._utils import figure_to_image
+    image = figure_to_image(fig)   # drawn once, written to every order's log (add_figure would draw it per log)
     for log in logs:
-        log.writer.add_figure("figure2", fig, exp.n_episodes)
+        log.writer.add_image("figure2", image, exp.n_episodes)
         log.close()
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
