@@ -22,8 +22,8 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
 from aesop_torch.agent import AgentConfig  # noqa: E402
-from sim.objects import DEFAULT_OBJECTS_FILE, archimedes_cm3, load_objects  # noqa: E402
-from train.experiment import draw_orders  # noqa: E402
+from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
+from train.experiment import closed_form_outcomes, draw_orders  # noqa: E402
 from train.population import run_population  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
@@ -32,18 +32,7 @@ POPULATIONS = ("1", "100", "10000", "all")
 
 def closed_form_world():
     objs = load_objects(DEFAULT_OBJECTS_FILE)
-
-    def measurement(s):
-        return {"rgb": list(s.rgb), "extent_cm": [float(x) for x in s.extent_cm], "fill": float(s.fill),
-                "mass_g": float(s.mass_g)}
-
-    outcomes = {}
-    for s in objs.train:
-        v = archimedes_cm3(s, objs.jar)
-        outcomes[s.name] = {"measurement": measurement(s), "observed_cm3": v, "archimedes_cm3": v,
-                            "goal_before": False, "goal_after": v > 200}
-    probes = {p.name: {"measurement": measurement(p), "archimedes_cm3": archimedes_cm3(p, objs.jar)}
-              for p in objs.probe}
+    outcomes, probes = closed_form_outcomes(objs)
     return [s.name for s in objs.train], [p.name for p in objs.probe], outcomes, probes
 
 
@@ -82,5 +71,5 @@ def main():
 
 
 if __name__ == "__main__":
-    with recorded("population"):
+    with recorded("population", enabled="--skip-run" not in sys.argv[1:]):   # only whole runs are recorded
         main()

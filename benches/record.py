@@ -58,8 +58,12 @@ def replace_block(text: str, name: str, new: str) -> str:
 
 
 @contextlib.contextmanager
-def recorded(name: str, path: Path = BENCHMARKS_MD):
-    """Print as usual and, if the body finishes, record everything printed as bench `name`'s latest output."""
+def recorded(name: str, path: Path = BENCHMARKS_MD, enabled: bool = True):
+    """Print as usual and, if the body finishes, record everything printed as bench `name`'s latest output.
+    enabled=False (a partial run, e.g. a bench's skip option) prints without recording."""
+    if not enabled:
+        yield
+        return
     buf = io.StringIO()
     with contextlib.redirect_stdout(_Tee(sys.stdout, buf)):
         yield

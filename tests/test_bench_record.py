@@ -47,3 +47,11 @@ def test_a_failed_run_leaves_the_file_as_it_was(tmp_path):
 def test_an_unclosed_block_is_refused():
     with pytest.raises(ValueError, match="no closing"):
         record.replace_block("x\n<!-- bench:alpha -->\nold\n", "alpha", "new")
+
+
+def test_a_disabled_record_prints_but_writes_nothing(tmp_path, capsys):
+    md = tmp_path / "BENCHMARKS.md"
+    md.write_text(HEAD)
+    with record.recorded("alpha", md, enabled=False):
+        print("alpha_rate=0")
+    assert md.read_text() == HEAD and capsys.readouterr().out == "alpha_rate=0\n"

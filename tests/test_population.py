@@ -12,8 +12,8 @@ import torch
 
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, MemoryConfig
-from sim.objects import DEFAULT_OBJECTS_FILE, archimedes_cm3, load_objects
-from train.experiment import Experiment, draw_orders, median_rel_error
+from sim.objects import DEFAULT_OBJECTS_FILE, load_objects
+from train.experiment import Experiment, closed_form_outcomes, draw_orders, median_rel_error
 from train.population import RecallCache, SharedRecallMemory, _row_keys, agreement, median_rel_errors, run_population
 from train.summary import knowledge_key
 
@@ -22,21 +22,10 @@ from train.summary import knowledge_key
 MIXED = ("red_heavy_cylinder", "blue_heavy_cylinder", "red_light_cylinder", "yellow_light_sphere", "green_light_box")
 
 
-def measurement(spec):
-    return {"rgb": list(spec.rgb), "extent_cm": [float(x) for x in spec.extent_cm], "fill": float(spec.fill),
-            "mass_g": float(spec.mass_g)}
-
-
 @pytest.fixture(scope="module")
 def world():
     objs = load_objects(DEFAULT_OBJECTS_FILE)
-    outcomes = {}
-    for s in objs.train:
-        v = archimedes_cm3(s, objs.jar)
-        outcomes[s.name] = {"measurement": measurement(s), "observed_cm3": v, "archimedes_cm3": v,
-                            "goal_before": False, "goal_after": v > 200}
-    probes = {p.name: {"measurement": measurement(p), "archimedes_cm3": archimedes_cm3(p, objs.jar)}
-              for p in objs.probe}
+    outcomes, probes = closed_form_outcomes(objs)
     return [s.name for s in objs.train], [p.name for p in objs.probe], outcomes, probes
 
 
@@ -216,3 +205,13 @@ def test_config_threads_and_progress(world):
     assert cfg.memory.max_episodes == 230 and cfg.hub.max_assemblies == 230   # the caller's config is not touched
     assert torch.get_num_threads() == threads
     assert seen == [(1, 2), (2, 2)] and pop["orders"] == 2
+
+
+def test_closed_form_outcomes_sink_by_volume_float_by_mass(world):
+    _, _, outcomes, probes = world
+    heavy, light = outcomes["red_heavy_cylinder"], outcomes["red_light_cylinder"]
+    assert heavy["observed_cm3"] == pytest.approx(3.141592653589793 * 3.18 ** 2 * 11.5, rel=1e-6)  # sinks: volume
+    assert light["observed_cm3"] == pytest.approx(14.0, rel=1e-6)                                   # floats: mass
+    assert heavy["goal_after"] and not light["goal_after"] and not heavy["goal_before"]
+    assert heavy["measurement"]["mass_g"] == 420.0 and set(probes) == {
+        "purple_heavy_cylinder", "white_light_cylinder", "grey_heavy_cube", "orange_light_box", "pink_light_cylinder"}

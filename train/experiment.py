@@ -42,6 +42,27 @@ def outcome_record(outcome) -> dict:
     }
 
 
+def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0) -> tuple[dict, dict]:
+    """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics: every object displaces
+    exactly its Archimedes volume and is measured as the file describes it (no sensor noise). For tests,
+    benchmarks and agents run without the simulator. The ball counts as reached after more than
+    reachable_above_cm3, a stand-in for the reach check (in the default jar it lies between 14 and 365 cm^3)."""
+    from sim.objects import archimedes_cm3
+
+    def measurement(s):
+        return {"rgb": [float(x) for x in s.rgb], "extent_cm": [float(x) for x in s.extent_cm],
+                "fill": float(s.fill), "mass_g": float(s.mass_g)}
+
+    outcomes = {}
+    for s in objects.train:
+        v = float(archimedes_cm3(s, objects.jar))
+        outcomes[s.name] = {"measurement": measurement(s), "observed_cm3": v, "archimedes_cm3": v,
+                            "goal_before": False, "goal_after": v > reachable_above_cm3}
+    probes = {s.name: {"measurement": measurement(s), "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
+              for s in objects.probe}
+    return outcomes, probes
+
+
 def draw_orders(n_objects: int, orders: str, seed: int) -> list[list[int]]:
     """'listed' -> the file's order; 'all' -> every permutation; 'N' -> N random orders from the seed."""
     if orders == "listed":
