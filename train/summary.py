@@ -3,7 +3,8 @@
 For large populations (more than FULL_RUNS orders) `runs` keeps the full episode records of the first FULL_RUNS
 orders only (the runner runs those in detail), and a compact `population` block covers every order: its final
 knowledge (one letter per property: U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error,
-and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed over every order.
+and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed
+over every order.
 """
 
 from __future__ import annotations
