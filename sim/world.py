@@ -21,6 +21,8 @@ smallest default displacement, 14 cm^3) plus optional gaussian noise from the wo
 
 from __future__ import annotations
 
+import os
+import sys
 import time
 import zlib
 from dataclasses import dataclass, field
@@ -81,6 +83,13 @@ class WorldConfig:
     level_noise_cm: float = 0.0
 
 
+def gui_unavailable() -> str | None:
+    """Why pybullet's GUI cannot open here, or None. Without an X display pybullet does not fail: it hangs."""
+    if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
+        return "the pybullet GUI needs an X display and DISPLAY is not set (without --gui the world runs headless)"
+    return None
+
+
 def _palm_down_root() -> torch.Tensor:
     """The palm normal pointing down, in the robot's root frame (its z is up, like the world's)."""
     return torch.tensor([[0.0, 0.0, -1.0]], dtype=torch.float64)
@@ -102,6 +111,8 @@ class World:
         self.seed = seed
         self.rng = np.random.default_rng(seed)   # re-seeded per episode from (seed, object name): see reset()
         self.gui = gui
+        if gui and gui_unavailable():
+            raise RuntimeError(gui_unavailable())
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.kin = ArmKinematics(config=c.ik)
         self.steps = 0

@@ -79,3 +79,11 @@ def test_resume_without_checkpoint_and_occupied_out_are_refused(tmp_path):
     r = run("--out", str(occupied))
     assert r.returncode == 2 and "already holds" in r.stderr
     assert (occupied / "summary.json").read_text() == "{}"  # an earlier run is never damaged
+
+
+def test_gui_without_a_display_is_refused_instead_of_hanging(tmp_path, monkeypatch):
+    # pybullet's GUI with no X display does not fail, it hangs: the runner must say so before anything is written
+    monkeypatch.delenv("DISPLAY", raising=False)
+    r = run("--gui", "--out", str(tmp_path / "o"))
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "DISPLAY" in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()

@@ -121,3 +121,9 @@ def test_bad_input_is_refused(world):
         world.run_episode("unicorn")
     with pytest.raises(ValueError, match="record"):
         world.run_episode("red_heavy_cylinder", record="yes")
+
+
+def test_gui_without_a_display_raises_a_clear_error(monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    with pytest.raises(RuntimeError, match="DISPLAY is not set"):
+        World(load_objects(DEFAULT_OBJECTS_FILE), gui=True)

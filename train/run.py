@@ -55,6 +55,10 @@ def parse_args(argv):
             raise UsageError(f"--orders must be a positive number, 'listed' or 'all', not {a.orders!r}")
     if a.seed < 0:
         raise UsageError(f"--seed must be >= 0, not {a.seed}")
+    if a.gui:
+        from sim.world import gui_unavailable
+        if gui_unavailable():
+            raise UsageError(f"--gui: {gui_unavailable()}")
     if a.resume and a.out is None:
         raise UsageError("--resume needs --out DIR (the run to continue)")
     if a.out is None:
