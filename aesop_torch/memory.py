@@ -75,9 +75,10 @@ class MemoryConfig:
     min_strength: float = 0.22
     # most episodes recalled for one cue: the experiment encodes at most its 8 training objects.
     max_recalls: int = 8
-    # agents recalled together (each with its own memory): 256 keeps the (256, 1000) working tensors in cache,
-    # measured 1.5x faster than all 4096 agents at once; and a bound on the float copy of their patterns
-    # (elements per chunk): 2^25 floats = 128 MB however many episodes they hold.
+    # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the
+    # (256, 1000) working tensors in cache, measured 1.5x faster than 4096 agents at once and 1.2x faster than
+    # 1,150 cues against one full memory at once (benches/memory_capacity.py); and a bound on the float copy of
+    # the agents' patterns (elements per chunk): 2^25 floats = 128 MB however many episodes they hold.
     chunk_agents: int = 256
     chunk_elements: int = 1 << 25
 
@@ -245,7 +246,7 @@ class EpisodicMemory(nn.Module):
         valid = torch.zeros(B, K, dtype=torch.bool, device=dev)
         if M > 0:
             shared = self.batch == 1
-            step = B if shared else max(1, min(c.chunk_agents, c.chunk_elements // (M * c.rows * c.cols)))
+            step = c.chunk_agents if shared else max(1, min(c.chunk_agents, c.chunk_elements // (M * c.rows * c.cols)))
             for lo in range(0, B, step):
                 sl = slice(lo, min(B, lo + step))
                 net = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start)
