@@ -16,6 +16,8 @@ import os
 import sys
 from pathlib import Path
 
+from train.physics import cores
+
 BENCHMARKS_MD = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
 SECTION = "## Latest output of each benchmark"
 
@@ -32,10 +34,6 @@ class _Tee(io.TextIOBase):
     def flush(self) -> None:
         for s in self.streams:
             s.flush()
-
-
-def cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
 def block(name: str, command: str, output: str, when: datetime.date, torch_version: str) -> str:

@@ -111,8 +111,8 @@ class World:
         self.seed = seed
         self.rng = np.random.default_rng(seed)   # re-seeded per episode from (seed, object name): see reset()
         self.gui = gui
-        if gui and gui_unavailable():
-            raise RuntimeError(gui_unavailable())
+        if gui and (why := gui_unavailable()):
+            raise RuntimeError(why)
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.kin = ArmKinematics(config=c.ik)
         self.steps = 0

@@ -30,12 +30,17 @@ def _task(job: tuple):
     return _WORLD.run_episode(name, record=record)
 
 
+def cores() -> int:
+    """The cores this process may run on (its affinity mask, not the machine's count)."""
+    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+
+
 class Physics:
     """Drops and inspections for the runner. workers=1 (or a GUI) simulates in this process."""
 
     def __init__(self, objects, seed: int = 0, gui: bool = False, workers: int | None = None):
         self.objects, self.seed, self.gui = objects, seed, gui
-        self.workers = 1 if gui else (workers or os.cpu_count() or 1)
+        self.workers = 1 if gui else (workers or cores())
         self._pool = None
 
     def run(self, jobs: list[tuple]) -> list:

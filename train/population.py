@@ -22,7 +22,6 @@ relative), and the batches here differ from Experiment's. Same inputs, same outp
 from __future__ import annotations
 
 import copy
-import os
 import time
 from collections import Counter
 
@@ -31,16 +30,15 @@ import torch
 
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, Recall
-from aesop_torch.rules import STATES
 from train.experiment import stack_measurements
+from train.physics import cores
+from train.summary import KNOWLEDGE_LETTERS
 
 # Sibling trie nodes stepped together. All 40,320 orders of the default set, 2 threads, shared recall cache:
 # 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB at 2048, 31.5 s / 2.1 GB at 4096 (each
 # level of the depth-first walk holds one piece alive, ~110 kB per agent, mostly the hub's W): 1024 is as fast as
 # any and lean.
 DEFAULT_CHUNK = 1024
-KNOWLEDGE_LETTERS = "ULDI"   # train.summary.knowledge_key: one letter per STATES code
-assert len(KNOWLEDGE_LETTERS) == len(STATES)
 
 
 def knowledge_keys(state: torch.Tensor) -> list[str]:
@@ -159,10 +157,6 @@ class SharedRecallMemory(EpisodicMemory):
         return cache.recall(keys, cue.device)
 
 
-def _cores() -> int:
-    return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
 class _Trie:
     """The orders sorted lexicographically; node[t][i] is the level-t node (prefix of length t + 1) of sorted row i."""
 
@@ -216,7 +210,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 
     t0 = time.perf_counter()
     old_threads = torch.get_num_threads()
-    torch.set_num_threads(threads or _cores())
+    torch.set_num_threads(threads or cores())
     try:
         config = copy.deepcopy(config)
         # as Experiment: an agent encodes at most one episode and one object per episode

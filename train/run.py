@@ -57,8 +57,8 @@ def parse_args(argv):
         raise UsageError(f"--seed must be >= 0, not {a.seed}")
     if a.gui:
         from sim.world import gui_unavailable
-        if gui_unavailable():
-            raise UsageError(f"--gui: {gui_unavailable()}")
+        if why := gui_unavailable():
+            raise UsageError(f"--gui: {why}")
     if a.resume and a.out is None:
         raise UsageError("--resume needs --out DIR (the run to continue)")
     if a.out is None:

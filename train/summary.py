@@ -9,15 +9,17 @@ over every order.
 
 from __future__ import annotations
 
-from collections import Counter
-
 from aesop_torch.rules import PROPERTIES, STATES
 
 FULL_RUNS = 64  # 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB
 
 
+KNOWLEDGE_LETTERS = "ULDI"   # one letter per rules.STATES code, in its order
+assert len(KNOWLEDGE_LETTERS) == len(STATES)
+
+
 def knowledge_key(k: dict) -> str:
-    return "".join("ULDI"[STATES.index(k[p]["state"])] for p in PROPERTIES)
+    return "".join(KNOWLEDGE_LETTERS[STATES.index(k[p]["state"])] for p in PROPERTIES)
 
 
 def build_summary(exp, population: dict | None = None) -> dict:
@@ -30,13 +32,12 @@ def build_summary(exp, population: dict | None = None) -> dict:
     keys = population["final_knowledge"] if population else [knowledge_key(k) for k in finals]
     summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": len(set(keys)) == 1}
     if population:
-        common, n = Counter(keys).most_common(1)[0]
         summary["population"] = {
             "orders": len(keys),
             "key": "one letter per property (" + ", ".join(PROPERTIES)
                    + "): U unknown, L likely irrelevant, D dominant, I irrelevant",
-            "most_common_knowledge": common,
-            "agree_fraction": n / len(keys),
+            "most_common_knowledge": population["most_common_knowledge"],
+            "agree_fraction": population["agree_fraction"],
             "final_knowledge": keys,
             "final_probe_rel_error": population["final_probe_rel_error"],
         }
