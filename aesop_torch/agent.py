@@ -26,9 +26,10 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
-from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, train_property_maps
+from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
 from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
+from .som import SelfOrganizingMap
 from .rules import ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, contradiction
 
 # Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order.
@@ -96,26 +97,39 @@ class EpisodeStep:
 
 
 class Agent(nn.Module):
-    def __init__(self, config: AgentConfig | None = None, batch: int = 1):
+    def __init__(self, config: AgentConfig | None = None, batch: int = 1, develop: bool = True):
+        """develop=False skips the maps' developmental training and leaves their codebooks at zero, for an agent
+        whose state is about to be loaded (`load_state_dict` brings the codebooks; the lateral spread follows)."""
         super().__init__()
         self.config = config = config or AgentConfig()
         self.batch = batch
-        g = torch.Generator().manual_seed(config.seed)
         self.encoder = SensoryEncoder(config.encoder)
-        self.maps = train_property_maps(config.som_samples, g, epochs=config.som_epochs)
+        if develop:
+            g = torch.Generator().manual_seed(config.seed)
+            self.maps = train_property_maps(config.som_samples, g, epochs=config.som_epochs)
+        else:
+            self.maps = nn.ModuleDict({name: SelfOrganizingMap(cfg) for name, cfg in default_map_configs().items()})
         self.properties = PROPERTIES
         self.hub = ObjectHub({name: m.weights.shape[0] for name, m in self.maps.items()}, config.hub, batch=batch)
         self.memory = EpisodicMemory(config.memory, batch=batch)
         self.rules = CausalRules(config.rules, batch=batch, properties=PROPERTIES)
         self.actions, self.body, self.reward = ActionHub(), BodyHub(), RewardCode()
-        # lateral spread of activity within each map (a unit's graded response to every codebook vector):
-        # turns a retro-activated unit into the bump bottom-up perception of its value would give
+        self.register_buffer("lateral", self._lateral(), persistent=False)
+        self.register_load_state_dict_post_hook(Agent._refresh_lateral)
+
+    @staticmethod
+    def _refresh_lateral(module: "Agent", _incompatible_keys) -> None:
+        module.lateral.copy_(module._lateral())
+
+    def _lateral(self) -> torch.Tensor:
+        """Lateral spread of activity within each map (a unit's graded response to every codebook vector): turns a
+        retro-activated unit into the bump bottom-up perception of its value would give. (P_all, U, U)."""
         U = self.hub.W.shape[2]
         lateral = torch.zeros(len(self.maps), U, U)
         for i, m in enumerate(self.maps.values()):
             n = m.weights.shape[0]
             lateral[i, :n, :n] = m.activity(m.weights)
-        self.register_buffer("lateral", lateral, persistent=False)
+        return lateral
 
     # -- perception -------------------------------------------------------------------------------------------
     def activities(self, measurement: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:

@@ -42,24 +42,34 @@ def outcome_record(outcome) -> dict:
     }
 
 
-def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0) -> tuple[dict, dict]:
-    """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics: every object displaces
-    exactly its Archimedes volume and is measured as the file describes it (no sensor noise). For tests,
-    benchmarks and agents run without the simulator. The ball counts as reached after more than
-    reachable_above_cm3, a stand-in for the reach check (in the default jar it lies between 14 and 365 cm^3)."""
+def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=None, seed: int = 0
+                         ) -> tuple[dict, dict]:
+    """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics. For tests, benchmarks and
+    agents run without the simulator. sensor=None: every object displaces exactly its Archimedes volume and is
+    measured exactly as the file describes it. With a `sim.sensor_model.SensorModel`, measurements and outcomes
+    carry that model's noise, drawn per object from (seed, name) as the world draws a drop's sensor noise. The ball
+    counts as reached after more than reachable_above_cm3, a stand-in for the reach check (in the default jar it
+    lies between 14 and 365 cm^3)."""
     from sim.objects import archimedes_cm3
 
-    def measurement(s):
+    def exact(s):
         return {"rgb": [float(x) for x in s.rgb], "extent_cm": [float(x) for x in s.extent_cm],
                 "fill": float(s.fill), "mass_g": float(s.mass_g)}
 
-    outcomes = {}
+    def sensed(s):
+        if sensor is None:
+            return exact(s), float(archimedes_cm3(s, objects.jar))
+        rng = sensor.rng(seed, s.name)
+        return sensor.measure(s, rng), sensor.observe(s, objects.jar, rng)
+
+    outcomes, probes = {}, {}
     for s in objects.train:
-        v = float(archimedes_cm3(s, objects.jar))
-        outcomes[s.name] = {"measurement": measurement(s), "observed_cm3": v, "archimedes_cm3": v,
+        m, v = sensed(s)
+        outcomes[s.name] = {"measurement": m, "observed_cm3": v,
+                            "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
                             "goal_before": False, "goal_after": v > reachable_above_cm3}
-    probes = {s.name: {"measurement": measurement(s), "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
-              for s in objects.probe}
+    for s in objects.probe:
+        probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
     return outcomes, probes
 
 
