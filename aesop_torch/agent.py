@@ -8,32 +8,46 @@ object-and-outcome source can drive it.
 Choices the paper leaves open, made here:
 - Weight before lifting: the expectation is formed after the object is lifted, so the felt weight is part of the
   cue, for dropped objects and probes alike (a probe is lifted, weighed and put back).
+- Graded maps, read as populations. An object is stored in the hub as the bump of activity around each map's winner
+  (hub.ObjectHub.allocate), and a map's activity, bottom-up or retro-activated from a recalled episode, is read
+  as a population vector (SelfOrganizingMap.decode): values between units, not only at a winner's codebook vector.
 - Which recalled episode the rules compare against: each of them. Every recalled episode is one comparison, with
-  DeltaProperty and DeltaContradiction both judged against that episode (its retro-activated properties and its
-  reward): judging a property change and an outcome change against the same past event is what lets the rules
-  attribute the one to the other. Comparing with the strongest recall alone lets a provisional belief (a property
-  wrongly grown dominant pulls recall towards episodes that share it) hide the very episode that would refute it.
-  The prediction still averages every recalled episode's reward, weighted by recall strength, as the paper says.
-- Encoding: an episode is encoded when nothing was recalled (pure exploration, the paper's episode 1) or when the
-  outcome contradicted the expectation (Growth or Uncertainty: "there is something new to learn"); an episode that
-  went as expected is not encoded (the paper's episode 2).
+  DeltaProperty (the property's decoded bottom-up value against the value that episode retro-activates, through
+  the pathway's strength in the comparison's context: an eliminated pathway retro-activates nothing, so it shows no
+  change) and DeltaContradiction (the observed volume against that episode's) judged against the same past event.
+- Prediction: a recall-strength-weighted readout that follows the dominant properties. Recalled episodes are split
+  by what became of their objects (floated or sank); within each, the log reward is fitted as a linear function of
+  the properties dominant in that context (weighted least squares, weights = recall strength), and read at the
+  present object's values. Where both fits exist and every recalled episode displaced no more than the other
+  context's fit predicts for it (what the agent sees in its own memory: a floater displaces less than a sinker of
+  its size would, a sinker less than a floater of its weight), the lesser of the two is expected; otherwise the
+  fit of the strongest recall's context.
+- Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
+  most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
+  recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
+  same (so later objects can still be compared with it).
 """
 
 from __future__ import annotations
 
+import math
 from dataclasses import asdict, dataclass, field
 
 import torch
 from torch import nn
 
 from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
-from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode
+from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
+from .rules import (DOMINANT, ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, context_of, contradiction,
+                    outcome_unclear)
 from .som import SelfOrganizingMap
-from .rules import ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, contradiction
 
 # Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order.
-ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END = range(7)
+ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE = range(8)
+# the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass
+FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 5), "weight": slice(5, 6)}
+N_FEATURES = 6
 
 
 @dataclass
@@ -46,17 +60,32 @@ class AgentConfig:
     # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
     som_samples: int = 4000
     som_epochs: int = 30
-    # DeltaProperty: 1 - cosine(bottom-up activity, top-down activity) above this means the property changed.
-    # Bumps one unit apart overlap with cosine ~0.6-0.8 (SOM quantisation of the same value), clearly different
-    # values give ~0; 0.5 sits between.
-    delta_p_threshold: float = 0.25
-    # The prediction averages recalled rewards weighted by strength ** sharpness. Recall strength adds up matches
-    # property by property, but the outcome needs them jointly (Archimedes: a sinker displaces its volume, a
-    # floater its mass); at power 8 an episode matching every causal property (strength ~1) outweighs one matching
-    # half of them (~0.5) 256 to 1, while near-equal matches still average. Measured over 300 orders of the
-    # default set: median probe error 23 % after 8 episodes at power 8, 36 % at 4, 42 % at 1 (the plain average).
-    prediction_sharpness: float = 8.0
+    # DeltaProperty, with a dead zone: a property changed when its decoded values differ by more than the upper
+    # bound, did not when by less than the lower, and a comparison with a property in between is left out (it
+    # cannot tell). Per property (color, shape, size, weight): colour as RGB distance; shape in [fill, extent
+    # ratios]; size and weight as |log ratio|. The bounds match the outcome's (RulesConfig): a size change above
+    # 8 % (26 % in volume) or a mass change above 25 % moves the displacement past the 20 % contradiction
+    # tolerance, one below 3 % (9 % in volume) or 5 % stays near the 5 % as-expected tolerance. Colour 0.15 and
+    # shape 0.1 are far above the camera's noise and below the gaps between named colours (>= 0.4) and between
+    # shape kinds (fill 1, 0.79, 0.52).
+    delta_p_band: tuple = ((0.08, 0.15), (0.08, 0.15), (0.03, 0.077), (0.049, 0.223))
+    # the wrist's noise on the felt mass (sim/world.py WorldConfig.mass_noise_g): a light object's weight is only
+    # called changed beyond 3 sigma of it (added to the weight bounds, as a relative difference of its mass)
+    felt_mass_noise_g: float = 1.0
+    # a pathway at or below this strength retro-activates nothing (the paper: eliminated, "they no longer will
+    # retro-activate each other"): the rules' eliminated strength (0.05) is below it, an undecided pathway after
+    # 14 Uncertainty firings (0.85^14 = 0.10) still above.
+    retro_floor: float = 0.1
+    # ridge of the readout's fit, relative to its total weight: enough to make a fit on one episode (or on episodes
+    # that share a value) flat instead of singular, too little to bend a fit on values that differ.
+    readout_ridge: float = 1e-5
     seed: int = 0
+
+    def __post_init__(self):
+        self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
+        if len(self.delta_p_band) != len(PROPERTIES) or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
+            raise ValueError(f"AgentConfig.delta_p_band needs {len(PROPERTIES)} (lo, hi) pairs with 0 <= lo <= hi, "
+                             f"got {self.delta_p_band}")
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -70,12 +99,14 @@ class AgentConfig:
 @dataclass
 class Anticipation:
     """What the agent expects of an object before dropping it (leading dim B)."""
-    expected: torch.Tensor   # (B,) the prediction: rewards of all recalled episodes averaged by recall strength
+    expected: torch.Tensor   # (B,) the readout's prediction, NaN where nothing was recalled
     rewards: torch.Tensor    # (B, K) each recalled episode's reward (NaN where not valid), strongest first
     recall: object           # memory.Recall
     acts: torch.Tensor       # (B, P_all, U) bottom-up map activities
-    winners: torch.Tensor    # (B, P_all)
     present: torch.Tensor    # (B, P_all)
+    values: dict             # map name -> (B, dim) decoded bottom-up values
+    recalled_values: dict    # map name -> (B, K, dim) values each recalled episode retro-activates
+    fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
 
 
 @dataclass
@@ -86,6 +117,7 @@ class EpisodeStep:
     delta_p: torch.Tensor    # (B, K, P) bool, against each recalled episode (strongest first)
     delta_c: torch.Tensor    # (B, K) bool
     fired: torch.Tensor      # (B, K, P) long, codes into rules.RULE_NAMES, per comparison
+    encoded: torch.Tensor    # (B,) bool
 
     def rules_fired(self) -> torch.Tensor:
         """(B, P) the one rule reported per property: the most decisive that fired in any comparison,
@@ -93,13 +125,12 @@ class EpisodeStep:
         rank = torch.tensor([0, 3, 2, 1])[self.fired]          # S < U < G < E
         best = rank.max(dim=1).values
         return torch.tensor([STATUS_QUO, UNCERTAINTY, GROWTH, ELIMINATION])[best]
-    encoded: torch.Tensor    # (B,) bool
 
 
 class Agent(nn.Module):
     def __init__(self, config: AgentConfig | None = None, batch: int = 1, develop: bool = True):
         """develop=False skips the maps' developmental training and leaves their codebooks at zero, for an agent
-        whose state is about to be loaded (`load_state_dict` brings the codebooks; the lateral spread follows)."""
+        whose state is about to be loaded (`load_state_dict` brings the codebooks)."""
         super().__init__()
         self.config = config = config or AgentConfig()
         self.batch = batch
@@ -113,101 +144,187 @@ class Agent(nn.Module):
         self.hub = ObjectHub({name: m.weights.shape[0] for name, m in self.maps.items()}, config.hub, batch=batch)
         self.memory = EpisodicMemory(config.memory, batch=batch)
         self.rules = CausalRules(config.rules, batch=batch, properties=PROPERTIES)
-        self.actions, self.body, self.reward = ActionHub(), BodyHub(), RewardCode()
-        self.register_buffer("lateral", self._lateral(), persistent=False)
-        self.register_load_state_dict_post_hook(Agent._refresh_lateral)
-
-    @staticmethod
-    def _refresh_lateral(module: "Agent", _incompatible_keys) -> None:
-        module.lateral.copy_(module._lateral())
-
-    def _lateral(self) -> torch.Tensor:
-        """Lateral spread of activity within each map (a unit's graded response to every codebook vector): turns a
-        retro-activated unit into the bump bottom-up perception of its value would give. (P_all, U, U)."""
-        U = self.hub.W.shape[2]
-        lateral = torch.zeros(len(self.maps), U, U)
-        for i, m in enumerate(self.maps.values()):
-            n = m.weights.shape[0]
-            lateral[i, :n, :n] = m.activity(m.weights)
-        return lateral
+        self.actions, self.body, self.reward, self.fate = ActionHub(), BodyHub(), RewardCode(), Fate()
 
     # -- perception -------------------------------------------------------------------------------------------
-    def activities(self, measurement: dict) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
-        """Bottom-up map activities (B, P_all, U), winners (B, P_all) and which maps have input (B, P_all)."""
+    def activities(self, measurement: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """Bottom-up map activities (B, P_all, U) and which maps have input (B, P_all)."""
         inputs = self.encoder(measurement)
         B = next(iter(inputs.values())).shape[0]
         U = self.hub.W.shape[2]
         acts = torch.zeros(B, len(self.maps), U)
-        winners = torch.zeros(B, len(self.maps), dtype=torch.long)
         present = torch.zeros(B, len(self.maps), dtype=torch.bool)
         for i, (name, som) in enumerate(self.maps.items()):
             if name in inputs:
                 a = som.activity(inputs[name])
                 acts[:, i, :a.shape[-1]] = a
-                winners[:, i] = som.winner(inputs[name])
                 present[:, i] = True
-        return acts, winners, present
+        return acts, present
+
+    def decode(self, acts: torch.Tensor) -> dict:
+        """(..., P_all, U) map activities -> {property: (..., dim) population-decoded value in the map's input}."""
+        return {name: self.maps[name].decode(acts[..., i, :self.maps[name].n_units])
+                for i, name in enumerate(self.maps) if name in PROPERTIES}
+
+    def retro_activate(self, assemblies: torch.Tensor) -> torch.Tensor:
+        """(B, K, N) hub assemblies -> (B, K, P_all, U) the map activity each retro-activates at full strength
+        (hub.ObjectHub.top_down before its strength gate: what the stored object looked like)."""
+        return torch.einsum("bkn,bpun->bkpu", assemblies.to(self.hub.W.dtype), self.hub.W) / \
+            self.config.hub.assembly_size
+
+    def features(self, values: dict) -> torch.Tensor:
+        """Decoded values -> (..., N_FEATURES) readout features: rgb, log fill, log size (cm), log mass (g)."""
+        e = self.config.encoder
+        size = values["size"][..., :1] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm)
+        mass = values["weight"][..., :1] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g)
+        return torch.cat([values["color"], values["shape"][..., :1].clamp_min(1e-3).log(), size, mass], -1)
 
     @torch.no_grad()
     def anticipate(self, measurement: dict) -> "Anticipation":
-        """Perceive and recall; learns nothing."""
-        acts, winners, present = self.activities(measurement)
+        """Perceive, recall and read out the expected displacement; learns nothing."""
+        acts, present = self.activities(measurement)
         recall = self.memory.recall(self.hub.bottom_up(acts, present))
         rewards = self.reward.decode(recall.episodes[:, :, ROW_REWARD])          # (B, K), NaN where not valid
-        w = recall.strength ** self.config.prediction_sharpness * recall.valid
-        expected = (w * torch.nan_to_num(rewards)).sum(-1) / w.sum(-1)          # NaN where nothing recalled
-        nan = torch.full_like(expected, float("nan"))
-        expected = torch.where(recall.any, expected, nan)
-        return Anticipation(expected, rewards, recall, acts, winners, present)
+        fates = self._fates(recall)
+        values = self.decode(acts)
+        recalled = self.decode(self.retro_activate(recall.episodes[:, :, ROW_OBJECT]))
+        expected = self.readout(self.features(values), self.features(recalled), rewards, fates,
+                                recall.strength * recall.valid)
+        return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates)
+
+    def _fates(self, recall) -> torch.Tensor:
+        row = recall.episodes[:, :, ROW_FATE]                                   # (B, K, N)
+        names = self.fate.encode(list(self.fate.names))                          # (2, N)
+        hit = (row[:, :, None, :] == names[None, None]).all(-1)                  # (B, K, 2)
+        return torch.where(hit.any(-1) & recall.valid, hit.long().argmax(-1), torch.full_like(hit[..., 0], -1,
+                                                                                              dtype=torch.long))
+
+    def readout(self, x: torch.Tensor, xk: torch.Tensor, rewards: torch.Tensor, fates: torch.Tensor,
+                weight: torch.Tensor) -> torch.Tensor:
+        """The expected displacement (B,) of objects with features x (B, F) from recalled episodes with features
+        xk (B, K, F), rewards (B, K) cm^3, fates (B, K) and weights (B, K) (0 for an invalid recall); NaN where
+        nothing was recalled. See the module docstring."""
+        B, K, F = xk.shape
+        dtype = x.dtype
+        # in float64: fits on a few episodes whose properties move together are ill-conditioned, and float32
+        # rounding (which differs with the batch an agent is computed in) would move the answer by percents
+        x, xk, weight = x.double(), torch.nan_to_num(xk).double(), (weight * ~torch.isnan(rewards)).double()
+        y = torch.nan_to_num(rewards, nan=1.0).clamp_min(1e-3).double().log()
+        # each context follows its own dominant properties; one without evidence of its own those dominant
+        # anywhere that it has not eliminated
+        dom = self.rules.dominant[:, :2]
+        fallback = (self.rules.state == DOMINANT)[:, None] & ~self.rules.eliminated[:, :2]
+        follow = torch.where(dom.any(-1, keepdim=True), dom, fallback)           # (B, 2, P)
+        cols = torch.zeros(B, 2, F, dtype=torch.bool)
+        for i, name in enumerate(PROPERTIES):
+            cols[:, :, FEATURE_COLUMNS[name]] = follow[:, :, i, None]
+        d = (xk[:, None] - x[:, None, None]) * cols[:, :, None]                   # (B, 2, K, F) centred features
+        A = torch.cat([torch.ones(B, 2, K, 1, dtype=d.dtype), d], -1)            # (B, 2, K, 1 + F)
+        ctx = torch.arange(2)[None, :, None]
+        w = weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0))   # unseen fates count in both
+        total = w.sum(-1)                                                         # (B, 2)
+        ridge = torch.eye(1 + F, dtype=d.dtype) * self.config.readout_ridge
+        ridge[0, 0] = 0.0
+        lhs = torch.einsum("bckf,bck,bckg->bcfg", A, w, A) + ridge * total[..., None, None].clamp_min(1e-12)
+        lhs = lhs + torch.eye(1 + F, dtype=d.dtype) * 1e-12                       # an empty context stays solvable
+        beta = torch.linalg.solve(lhs, torch.einsum("bckf,bck,bk->bcf", A, w, y))  # (B, 2, 1 + F)
+        law = torch.einsum("bckf,bcf->bck", A, beta)                              # each context's fit at each episode
+        pred = torch.where(total > 0, beta[..., 0], torch.full_like(total, float("nan")))   # (B, 2) log cm^3
+        both = (total > 0).all(-1)
+        # the lesser law holds if no recalled episode displaced more than the other context's fit predicts for it
+        slack = math.log(1.0 + self.config.rules.contradiction_rel)
+        other = torch.stack([law[:, 1], law[:, 0]], 1)                            # (B, 2, K): the other fit
+        seen = (weight > 0) & (fates >= 0)
+        over = torch.stack([(fates == c) & seen & (other[:, c] < y - slack) for c in range(2)], 0).any(0).any(-1)
+        lesser = torch.nan_to_num(pred, nan=float("inf")).amin(-1)
+        strongest = torch.where(seen, weight, torch.full_like(weight, -1.0)).argmax(-1)
+        fate0 = fates.gather(1, strongest[:, None])[:, 0].clamp(min=0)
+        by_fate = pred.gather(1, fate0[:, None])[:, 0]
+        single = torch.nan_to_num(pred, nan=float("inf")).amin(-1)               # the one context with a fit
+        out = torch.where(both, torch.where(over, by_fate, lesser), single)
+        out = torch.where((total > 0).any(-1), out, torch.full_like(out, float("nan")))
+        return out.exp().to(dtype)
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
         return self.anticipate(measurement).expected
 
-    def delta_property(self, acts: torch.Tensor, recall) -> torch.Tensor:
-        """(B, K, P) bool: bottom-up activity differs from the activity each recalled episode retro-activates."""
-        P, K = len(self.properties), recall.episodes.shape[1]
-        out = torch.zeros(acts.shape[0], K, P, dtype=torch.bool)
-        for k in range(int(recall.valid.sum(1).max())):  # recalls are sorted valid-first
-            top = self.hub.top_down(recall.episodes[:, k, ROW_OBJECT].to(acts.dtype))  # (B, P_all, U)
-            top = torch.einsum("bpu,puv->bpv", top, self.lateral)
-            cos = nn.functional.cosine_similarity(acts[:, :P], top[:, :P], dim=-1, eps=1e-12)
-            out[:, k] = (1.0 - cos) > self.config.delta_p_threshold
-        return out
+    def delta_property(self, values: dict, recalled: dict, strength: torch.Tensor | None = None
+                       ) -> tuple[torch.Tensor, torch.Tensor]:
+        """DeltaProperty: does a property's decoded bottom-up value (values[p]: (B, dim)) differ from the value each
+        recalled episode retro-activates (recalled[p]: (B, K, dim))? Returns (changed, unclear), both (B, K, P)
+        bool: changed beyond the property's band, or inside it (AgentConfig.delta_p_band). strength (B, K, P): the
+        pathway's strength for each comparison (default 1); at or below `retro_floor` the pathway retro-activates
+        nothing, so there is nothing to differ from (neither changed nor unclear)."""
+        x, xk = self.features(values)[:, None], self.features(recalled)
+        gaps = {"color": (values["color"][:, None] - recalled["color"]).norm(dim=-1),
+                "shape": (values["shape"][:, None] - recalled["shape"]).norm(dim=-1),
+                "size": (x[..., 4] - xk[..., 4]).abs(), "weight": (x[..., 5] - xk[..., 5]).abs()}
+        noise = 3.0 * self.config.felt_mass_noise_g / torch.minimum(x[..., 5], xk[..., 5]).exp()
+        changed, unclear = [], []
+        for i, p in enumerate(PROPERTIES):
+            lo, hi = self.config.delta_p_band[i]
+            if p == "weight":
+                lo, hi = lo + noise, hi + noise
+            gap = torch.nan_to_num(gaps[p], nan=0.0)
+            changed.append(gap > hi)
+            unclear.append((gap > lo) & (gap <= hi))
+        changed, unclear = torch.stack(changed, -1), torch.stack(unclear, -1)
+        if strength is not None:
+            live = strength > self.config.retro_floor
+            changed, unclear = changed & live, unclear & live
+        return changed, unclear
 
     # -- one episode ------------------------------------------------------------------------------------------
     @torch.no_grad()
     def step(self, measurement: dict, observed_cm3: torch.Tensor, goal_before: torch.Tensor,
-             goal_after: torch.Tensor, learn: torch.Tensor | None = None) -> EpisodeStep:
+             goal_after: torch.Tensor, learn: torch.Tensor | None = None,
+             sank: torch.Tensor | None = None) -> EpisodeStep:
         """One episode for every agent: the object was lifted (measurement), dropped (observed_cm3).
 
         goal_before / goal_after: (B,) bool, the ball reachable before / after the drop. learn: (B,) bool, agents
-        that take part (default all).
+        that take part (default all). sank: (B,) bool, the object came to rest on the bottom (False: it floats);
+        None when not seen (its comparisons then count in the mixed context, and it is stored without a fate).
         """
         B = self.batch
         learn = torch.ones(B, dtype=torch.bool) if learn is None else learn
         observed = torch.as_tensor(observed_cm3, dtype=torch.float32).reshape(B)
+        fate = torch.full((B,), -1, dtype=torch.long) if sank is None else torch.as_tensor(sank).reshape(B).long()
         a = self.anticipate(measurement)
-        recall, acts = a.recall, a.acts
+        recall = a.recall
         compared = recall.valid & learn[:, None]                                   # (B, K)
-        delta_p = self.delta_property(acts, recall) & compared[:, :, None]          # (B, K, P)
+        K = compared.shape[1]
+        context = context_of(fate[:, None].expand(B, K), a.fates)                  # (B, K)
         delta_c = contradiction(observed[:, None], a.rewards, self.config.rules) & compared
-        # every recalled episode is a comparison, strongest first; the rules' precedence makes the knowledge the
-        # same whatever order the comparisons come in (see rules.py)
+        unclear_c = outcome_unclear(observed[:, None], a.rewards, self.config.rules)
         strength = self.hub.strength[:, :len(self.properties)]
-        fired = torch.stack([self.rules.apply(delta_p[:, k], delta_c[:, k], compared[:, k], strength=strength)
-                             for k in range(compared.shape[1])], dim=1)           # (B, K, P)
-        # an episode is new when nothing was recalled or it contradicts the episode it is most like
-        encoded = learn & (~recall.any | delta_c[:, 0])
+        fired, delta_p, skipped = [], [], []
+        for k in range(K):
+            # each comparison sees the pathways as they are in its context, after the comparisons before it
+            gate = self.rules.context_strength()[torch.arange(B), context[:, k]]
+            dp, unclear = self.delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
+                                              gate[:, None])
+            # a comparison that cannot tell (a property or the outcome in its dead zone) is left out
+            use = compared[:, k] & ~unclear[:, 0].any(-1) & ~unclear_c[:, k]
+            dp = dp[:, 0] & use[:, None]
+            delta_p.append(dp)
+            skipped.append(compared[:, k] & ~use)
+            fired.append(self.rules.apply(dp, delta_c[:, k] & use, use, strength=strength, context=context[:, k]))
+        fired, delta_p, skipped = torch.stack(fired, 1), torch.stack(delta_p, 1), torch.stack(skipped, 1)
+        # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
+        # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
+        # tell, or a different object that happened to end the same
+        same = recall.valid[:, 0] & ~delta_c[:, 0] & ~unclear_c[:, 0] & (delta_p[:, 0].sum(-1) <= 1) & ~skipped[:, 0]
+        encoded = learn & ~same
         if encoded.any():
-            self._encode(acts, a.winners, a.present, observed, goal_before, goal_after, encoded)
+            self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
 
-    def _encode(self, acts, winners, present, observed, goal_before, goal_after, mask) -> None:
+    def _encode(self, acts, present, observed, goal_before, goal_after, fate, mask) -> None:
         """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet."""
         best, assembly = self.hub.match(acts, present)
         new = mask & (best < self.config.hub.match_threshold)
-        fresh = self.hub.allocate(winners, present, new)
+        fresh = self.hub.allocate(acts, present, new)
         assembly = torch.where(new[:, None], fresh, assembly)
         B, cfg = self.batch, self.config.memory
         sheet = torch.zeros(B, cfg.rows, cfg.cols, dtype=torch.bool)
@@ -219,10 +336,32 @@ class Agent(nn.Module):
         sheet[:, ROW_REWARD] = self.reward.encode(observed)
         sheet[:, ROW_BODY_END] = self.body.encode(["goal_reached" if r else "goal_unreachable"
                                                    for r in goal_after.tolist()])
+        seen = fate >= 0
+        if seen.any():
+            sheet[seen, ROW_FATE] = self.fate.encode([self.fate.names[int(f)] for f in fate[seen]])
         self.memory.store(sheet, mask)
 
     def knowledge(self, b: int = 0) -> dict:
         return self.rules.knowledge(b)
+
+    @torch.no_grad()
+    def pairwise_evidence(self, measurement: dict, observed_cm3: torch.Tensor, sank: torch.Tensor
+                          ) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """Every pair of n episodes compared through this agent's maps, at full strength, as
+        `rules.batch_knowledge` reads them: (delta_p (n, n, P), delta_c (n, n), context (n, n)), episode j against
+        episode i at [i, j]. A pair that cannot tell (a property or the outcome in its dead zone) shows no change
+        and no contradiction, as the agent leaves such a comparison out."""
+        acts, _ = self.activities(measurement)
+        values = self.decode(acts)
+        observed = torch.as_tensor(observed_cm3, dtype=torch.float32)
+        n = observed.shape[0]
+        dp, unclear = self.delta_property(values, {p: v[None].expand(n, n, -1) for p, v in values.items()})
+        dp, unclear = dp.transpose(0, 1), unclear.transpose(0, 1)                 # [i, j]: j against i
+        dc = contradiction(observed[None, :], observed[:, None], self.config.rules)
+        skip = unclear.any(-1) | outcome_unclear(observed[None, :], observed[:, None], self.config.rules)
+        fate = torch.as_tensor(sank).long()
+        context = context_of(fate[:, None].expand(n, n), fate[None, :].expand(n, n))
+        return dp & ~skip[..., None], dc & ~skip, context
 
     @torch.no_grad()
     def select(self, index) -> "Agent":
@@ -230,7 +369,7 @@ class Agent(nn.Module):
 
         Lets a population branch: agents that saw the same first objects are one agent until their orders differ.
         The learned per-agent state (hub, memory, rules: every persistent buffer, all batch-first) is copied; the
-        property maps and the lateral spread are frozen after development, so they are shared, not retrained."""
+        property maps are frozen after development, so they are shared, not retrained."""
         index = torch.as_tensor(index)
         if index.ndim != 1 or index.numel() == 0 or index.is_floating_point() or index.dtype == torch.bool:
             raise ValueError(f"index must be a non-empty 1-d integer sequence, got shape {tuple(index.shape)} "
@@ -241,8 +380,7 @@ class Agent(nn.Module):
         nn.Module.__init__(new)
         new.config, new.batch, new.properties = self.config, index.numel(), self.properties
         new.encoder, new.maps = self.encoder, self.maps
-        new.actions, new.body, new.reward = self.actions, self.body, self.reward
-        new.register_buffer("lateral", self.lateral, persistent=False)
+        new.actions, new.body, new.reward, new.fate = self.actions, self.body, self.reward, self.fate
         sizes = {name: m.weights.shape[0] for name, m in self.maps.items()}
         # the parts keep their types (a subclass, e.g. a memory with a different recall schedule, stays one)
         new.hub = type(self.hub)(sizes, self.config.hub, batch=1).to(self.hub.W.device)

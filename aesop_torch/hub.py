@@ -36,7 +36,7 @@ class HubConfig:
     # `match` above this: the object is already known. The same object seen again scores 1 (relative activity) or
     # a little less (a remeasurement a hair off), one of four equally weighted properties changed scores <= 0.75
     # (a bit more if the new value is close to the old one); 0.85 sits between.
-    match_threshold: float = 0.85
+    match_threshold: float = 0.97
     # the map that holds names, for `cross_modal`
     word_map: str = "word"
     # bottom_up reads each map's activity relative to its peak (divisive normalisation): the map's winner drives
@@ -44,6 +44,10 @@ class HubConfig:
     # its unit anywhere from 0.6 to 1.0, see encoders), the graded activity sets how much every other unit drives.
     # So a stored object shown again gives exactly 1 on its assembly. False: raw activities, as given.
     relative_activity: bool = True
+    # graded storage keeps the bump's units down to this fraction of its peak: at the maps' activity width that is
+    # ~2.5 units either side of the winner, enough for a population read-out to land within ~1 % of a unit
+    # between them (SelfOrganizingMap.decode), while W stays sparse
+    store_floor: float = 0.05
 
 
 class ObjectHub(nn.Module):
@@ -71,6 +75,8 @@ class ObjectHub(nn.Module):
         # wired[b, m, k]: map m has a pathway to hub neuron k (W[b, m, :, k] has a 1); kept beside W because
         # reading all of W for it on every bottom-up pass cost as much as the pass itself
         self.register_buffer("wired", torch.zeros(batch, P, N, dtype=torch.bool))
+        # norm[b, m, k] = W_mk . W_mk, the stored pattern's energy, kept beside W for the same reason
+        self.register_buffer("norm", torch.zeros(batch, P, N))
         self.register_buffer("assemblies", torch.zeros(batch, c.max_assemblies, N, dtype=torch.bool))
         self.register_buffer("n_assemblies", torch.zeros(batch, dtype=torch.long))
 
@@ -96,16 +102,17 @@ class ObjectHub(nn.Module):
     def bottom_up(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Maps -> hub. acts (B, P, U_max) graded map activities, present (B, P) maps with input -> (B, N) in [0, 1].
 
-        u_k = sum_m s_m min(1, (a_m W_m)_k) / sum_m s_m, over present maps with a pathway to k (some W_m[:, k] = 1),
-        with a_m relative to its peak (see HubConfig.relative_activity). A stored object shown again gives 1 on its
-        assembly; with four equal strengths, one property changed gives 0.75. A map with strength 0 drops out of
-        both sums: it neither helps nor hurts. (The min(1, .) keeps a neuron shared by two assemblies from being
-        driven twice by one map.)
+        u_k = sum_m s_m d_mk / sum_m s_m over present maps with a pathway to k, where d_mk = (a_m . W_mk) /
+        (W_mk . W_mk), clamped to [0, 1], is how well map m's activity a_m (relative to its peak, see
+        HubConfig.relative_activity) matches the pattern W_mk stored onto neuron k: 1 when the stored object is shown
+        again, falling off smoothly as its value moves away. With four equal strengths, one property changed to a
+        clearly different value gives 0.75. A map with strength 0 drops out of both sums: it neither helps nor hurts.
         """
         acts, present = self._check(acts, present)
         if self.config.relative_activity:
             acts = acts / acts.amax(-1, keepdim=True).clamp_min(1e-12)
-        drive = torch.einsum("bpu,bpuk->bpk", acts, self.W).clamp(max=1.0)       # (B, P, N)
+        drive = torch.einsum("bpu,bpuk->bpk", acts, self.W) / self.norm.clamp_min(1e-12)     # (B, P, N)
+        drive = drive.clamp(0.0, 1.0)
         gate = self.strength[:, :, None] * present[:, :, None] * self.wired  # (B, P, N)
         den = gate.sum(1)
         return torch.where(den > 0, (gate * drive).sum(1) / den.clamp_min(1e-12), torch.zeros_like(den))
@@ -161,19 +168,33 @@ class ObjectHub(nn.Module):
     @torch.no_grad()
     def allocate(self, winners: torch.Tensor, present: torch.Tensor, mask: torch.Tensor,
                  generator: torch.Generator | None = None) -> torch.Tensor:
-        """One-shot storage of a new object for the agents in mask (B,). winners (B, P) long map winners,
-        present (B, P) maps with input. Picks the assembly_size least-used hub neurons (ties broken at random by an
-        optional generator, else to the lower index), sets W[b, m, winner_m, k] = 1 for every present map m and
-        assembly neuron k.
-        Returns the new assemblies (B, N) bool (empty where mask is False)."""
+        """One-shot storage of a new object for the agents in mask (B,), present (B, P) maps with input.
+
+        winners: (B, P) long map winners (the paper's binary rule: W = 1 from each winner), or (B, P, U_max) graded
+        map activities: W onto each assembly neuron is then the activity relative to its peak, the whole bump
+        around the winner (1 at the winner), units below `HubConfig.store_floor` left at 0. The bump is what lets
+        retro-activation be decoded as a population (SelfOrganizingMap.decode) between units, not only at the
+        winner's codebook vector. Picks the assembly_size least-used hub neurons (ties broken at random by an
+        optional generator, else to the lower index). Returns the new assemblies (B, N) bool (empty where mask is
+        False)."""
         B, P, U, N = self.W.shape
-        if winners.shape != (B, P) or present.shape != (B, P) or mask.shape != (B,):
-            raise ValueError(f"winners and present must be (B, P) = {(B, P)} and mask (B,) = ({B},), got "
-                             f"{tuple(winners.shape)}, {tuple(present.shape)}, {tuple(mask.shape)}")
+        graded = winners.is_floating_point()
+        if (winners.shape != ((B, P, U) if graded else (B, P))) or present.shape != (B, P) or mask.shape != (B,):
+            raise ValueError(f"winners must be (B, P) = {(B, P)} or activities (B, P, U) = {(B, P, U)}, present "
+                             f"(B, P) and mask (B,) = ({B},), got {tuple(winners.shape)}, {tuple(present.shape)}, "
+                             f"{tuple(mask.shape)}")
         present, mask = present.bool(), mask.bool()
         active = present & mask[:, None]
-        if (active & ((winners < 0) | (winners >= self.sizes))).any():
-            raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
+        if graded:
+            pattern = winners.to(self.W.dtype) / winners.amax(-1, keepdim=True).clamp_min(1e-12)
+            pattern = torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
+            if (active & (pattern.sum(-1) == 0)).any():
+                raise ValueError("a present map has no activity to store")
+        else:
+            if (active & ((winners < 0) | (winners >= self.sizes))).any():
+                raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
+            pattern = torch.zeros(B, P, U, dtype=self.W.dtype, device=self.W.device)
+            pattern.scatter_(2, winners.clamp(0, U - 1)[:, :, None], 1.0)
         if (mask & (self.n_assemblies >= self.config.max_assemblies)).any():
             raise ValueError(f"object hub full: {self.config.max_assemblies} assemblies stored")
         # tie-break in [0, 0.5): never reorders neurons of different usage. Random with a generator (drawn for every
@@ -187,8 +208,9 @@ class ObjectHub(nn.Module):
         assembly = torch.zeros(B, N, dtype=torch.bool, device=self.W.device)
         assembly.scatter_(1, pick, True)
         assembly &= mask[:, None]
-        b, m = active.nonzero(as_tuple=True)
-        self.W[b, m, winners[b, m]] = torch.maximum(self.W[b, m, winners[b, m]], assembly[b].to(self.W.dtype))
+        write = active[:, :, None, None] & assembly[:, None, None, :]              # (B, P, 1, N)
+        self.W.copy_(torch.where(write, torch.maximum(self.W, pattern[..., None]), self.W))
+        self.norm.copy_((self.W * self.W).sum(2))
         self.wired |= active[:, :, None] & assembly[:, None, :]
         self.usage += assembly.long()
         slot = self.n_assemblies.clamp(max=self.config.max_assemblies - 1)
@@ -245,12 +267,21 @@ class BodyHub(_TwoHotNames):
     names = ("goal_unreachable", "goal_reached", "holding", "hand_free")
 
 
+class Fate(_TwoHotNames):
+    """What became of a dropped object, as the robot sees it in the jar: it floats at the surface, or it sank and
+    rests on the bottom. Stored with the episode; the rules compare like with like (`rules.CONTEXTS`)."""
+    names = ("floated", "sank")
+
+
 @dataclass
 class RewardConfig:
-    # 1250 cm^3 raises the water of the default 12 cm jar by 11 cm (from 14 to 25 of its 30 cm): more than any
-    # object that fits through its mouth displaces; larger volumes are clamped
-    max_cm3: float = 1250.0
-    # 25 coarse x 25 fine units: 625 levels, a 2 cm^3 step, finer than the water level can be read (~11 cm^3)
+    # volumes from min_cm3 to max_cm3 on a log scale: a relative step, the same at 5 cm^3 as at 500 (a linear 2 cm^3
+    # step was 40 % of a 5 cm^3 floater). 1250 cm^3 raises the default jar's water by 11 cm, more than any object
+    # that fits through its mouth displaces; smaller and larger volumes are clamped
+    min_cm3: float = 0.5
+    max_cm3: float = 2000.0
+    # 25 coarse x 25 fine units: 625 levels over a factor 4000, a step of 1.3 %, so a volume is stored within 0.7 %,
+    # finer than a reading of the smallest displacements (~0.1 cm^3 of level resolution on a few cm^3)
     coarse: int = 25
     fine: int = 25
 
@@ -258,16 +289,19 @@ class RewardConfig:
 class RewardCode:
     """A displaced volume as a 2-hot memory row: one of `coarse` units plus one of `fine` units.
 
-    value = (coarse_index * fine + fine_index) * step, step = max_cm3 / (coarse * fine) = 2 cm^3. Encoding rounds
-    to the nearest step, halves up (365 cm^3 -> 366), and clamps to 0..(coarse * fine - 1) * step (1248 cm^3).
+    level = coarse_index * fine + fine_index, value = min_cm3 * (max_cm3 / min_cm3) ** (level / (levels - 1)):
+    a logarithmic code. Encoding rounds log(volume) to the nearest level and clamps to min_cm3..max_cm3.
     """
 
     def __init__(self, config: RewardConfig | None = None, n_neurons: int = N_NEURONS):
         self.config = c = config or RewardConfig()
         if c.coarse + c.fine > n_neurons:
             raise ValueError(f"coarse + fine = {c.coarse + c.fine} units do not fit in {n_neurons} neurons")
+        if not 0 < c.min_cm3 < c.max_cm3:
+            raise ValueError(f"RewardConfig needs 0 < min_cm3 < max_cm3, got {c.min_cm3}, {c.max_cm3}")
         self.n_neurons = n_neurons
-        self.step = c.max_cm3 / (c.coarse * c.fine)
+        self.levels = c.coarse * c.fine
+        self.step = math.log(c.max_cm3 / c.min_cm3) / (self.levels - 1)   # in log(cm^3) per level
 
     def encode(self, cm3) -> torch.Tensor:
         """(...) volumes in cm^3 -> (..., N) bool 2-hot rows."""
@@ -275,7 +309,8 @@ class RewardCode:
         v = torch.as_tensor(cm3, dtype=torch.float64)
         if not torch.isfinite(v).all():
             raise ValueError("reward volumes must be finite")
-        q = torch.floor(v / self.step + 0.5).clamp(0, c.coarse * c.fine - 1).long()
+        level = (v.clamp(min=c.min_cm3).log() - math.log(c.min_cm3)) / self.step
+        q = torch.floor(level + 0.5).clamp(0, self.levels - 1).long()
         out = torch.zeros(*v.shape, self.n_neurons, dtype=torch.bool)
         out.scatter_(-1, (q // c.fine)[..., None], True)
         out.scatter_(-1, (c.coarse + q % c.fine)[..., None], True)
@@ -291,5 +326,6 @@ class RewardCode:
         on = rows > 0.5
         coarse, fine, rest = on[..., :c.coarse], on[..., c.coarse:c.coarse + c.fine], on[..., c.coarse + c.fine:]
         valid = (coarse.sum(-1) == 1) & (fine.sum(-1) == 1) & ~rest.any(-1)
-        value = (coarse.long().argmax(-1) * c.fine + fine.long().argmax(-1)).float() * self.step
+        level = (coarse.long().argmax(-1) * c.fine + fine.long().argmax(-1)).double()
+        value = (math.log(c.min_cm3) + level * self.step).exp().float()
         return torch.where(valid, value, torch.full_like(value, math.nan))

@@ -72,7 +72,7 @@ class MemoryConfig:
     # an overlap below this is a chance coincidence, not a memory of the cue: one shared neuron of two 5-neuron
     # assemblies at full activity gives 1/5 = 0.2, while an object sharing one property in four with a stored one
     # (hub activity 0.25) is still recalled.
-    min_strength: float = 0.22
+    min_strength: float = 0.05
     # most episodes recalled for one cue: the experiment encodes at most its 8 training objects.
     max_recalls: int = 8
     # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the

@@ -1,25 +1,28 @@
 """The four learning rules (Elimination, Growth, Uncertainty, Status quo) and the causal knowledge they build.
 
-The paper gives the rules as a truth table over two comparisons: DeltaProperty (a property map's bottom-up activity
-differs from its top-down activity retro-activated from the recalled episode) and DeltaContradiction (the observed
-reward differs from the expected one). It leaves open what happens when evidence conflicts across episodes; the
-final knowledge must not depend on the order the objects came in, so knowledge here is the *strongest* kind of
-evidence seen so far, under a fixed precedence, never the most recent:
+The paper gives the rules as a truth table over two comparisons of the present with a recalled past episode:
+DeltaProperty (a property map's bottom-up activity differs from the activity the episode retro-activates) and
+DeltaContradiction (the observed reward differs from the episode's). It leaves open what happens when evidence
+conflicts across episodes, and when several properties change at once. Here every comparison is kept as evidence
+and the knowledge is a function of the evidence *set*, so it cannot depend on the order the evidence came in:
 
-    clean Growth  >  Elimination  >  ambiguous Growth  >  Uncertainty  >  nothing
-
-- clean Growth: this property alone changed (besides properties already known to be irrelevant) and the outcome
-  changed. That is an intervention on one variable with an
-  effect, the strongest causal evidence there is: the property is *dominant*, and no later null result overturns it.
-- Elimination: the property changed and the outcome did not: *irrelevant*. It overrides an ambiguous Growth, which
-  is how a property judged dominant on confounded evidence ends irrelevant.
-- ambiguous Growth: several properties changed at once and the outcome changed; each is provisionally *dominant*.
-- Uncertainty: the outcome changed but this property did not: *likely irrelevant*, a certainty that grows with each
-  firing towards 1 without reaching it.
-
-The hub pathway strength of a property is a function of its knowledge (and, while undecided, of its Uncertainty
-count), written into the hub's strength tensor in place. Deriving it from the knowledge, rather than multiplying it
-episode after episode, keeps the final connectivity as order-independent as the knowledge itself.
+- Contexts. A sinker displaces its volume and a floater its weight, so whether a property matters depends on the
+  regime: size and shape decide a sinker's displacement and not a floater's, weight the other way round. The robot
+  sees what became of each object (it floats, or it rests on the bottom), and each comparison is evidence in its
+  context: both floated, both sank, or one of each (`CONTEXTS`).
+- Elimination (the property changed, the outcome did not): the property does not matter in this context, when it
+  alone changed (besides properties already eliminated there; several changes at once may cancel). Its pathway
+  no longer retro-activates in this context, so later comparisons there no longer see it change.
+- Growth (the outcome changed, and so did the properties in its change set): at least one of the changed
+  properties matters. One changed property is the paper's clean case; several at once are a confound.
+- Dominant in a context: the properties of the minimal explanations. An explanation is a set of properties, none
+  eliminated in the context (nor, unless the context's evidence needs it, in another), that holds a changed
+  property of every contradicted comparison (a hitting set of the change sets); the minimal ones are the smallest. A clean Growth forces its property in; a confound is
+  resolved by the rest of the evidence (colour changed together with weight is explained by weight once weight
+  explains the other contradictions), and a confound nothing resolves makes each candidate dominant.
+- Knowledge per property, over contexts: dominant if dominant in some context; else irrelevant if eliminated in
+  some context; else likely irrelevant if Uncertainty fired (the outcome changed while it did not), with a
+  certainty that grows with each firing without reaching 1; else unknown.
 """
 
 from __future__ import annotations
@@ -34,6 +37,14 @@ RULE_NAMES = ("S", "E", "G", "U")  # codes 0..3 in `CausalRules.apply`'s output
 STATUS_QUO, ELIMINATION, GROWTH, UNCERTAINTY = range(4)
 STATES = ("unknown", "likely_irrelevant", "dominant", "irrelevant")
 UNKNOWN, LIKELY_IRRELEVANT, DOMINANT, IRRELEVANT = range(4)
+CONTEXTS = ("floating", "sinking", "mixed")   # both floated, both sank, one of each (or a fate not seen)
+FLOATING, SINKING, MIXED = range(3)
+
+
+def context_of(fate_a: torch.Tensor, fate_b: torch.Tensor) -> torch.Tensor:
+    """Fates (0 floated, 1 sank, -1 not seen) of the two episodes compared -> the comparison's context code."""
+    same = (fate_a == fate_b) & (fate_a >= 0)
+    return torch.where(same, fate_a.clamp(min=0), torch.full_like(fate_a, MIXED))
 
 
 @dataclass
@@ -49,11 +60,17 @@ class RulesConfig:
     # certainty of "likely irrelevant" after n Uncertainty firings: 1 - (1 - step)^n, i.e. 0.3, 0.51, 0.66, ...
     # grows with every firing and never reaches 1 on its own.
     certainty_step: float = 0.3
-    # DeltaContradiction tolerance: |observed - expected| > max(abs, rel * expected). abs: the water level is read
-    # to ~1 mm, which in a 12 cm jar is ~11 cm^3; rel: an expectation averaged over similar episodes is not exact,
-    # and a 15 % miss is still "behaved as expected" while the paper's contradiction (365 vs 24 cm^3) is 93 %.
-    contradiction_abs_cm3: float = 12.0
-    contradiction_rel: float = 0.15
+    # DeltaContradiction, with a dead zone between "as expected" and "contradicted": a comparison whose outcome falls
+    # between them says nothing and is left out. As expected: within max(same_abs, same_rel x expected); the level
+    # is read to 0.01 mm (0.1 cm^3 in a 12 cm jar) and the simulated water settles within ~0.5 % of Archimedes.
+    # Contradicted: off by more than max(abs, rel x expected). The zone keeps the rules from reading a property's
+    # change below what the maps can see as a change of outcome, and the reverse (AgentConfig.delta_p_band): a mass
+    # or size change the maps call a change moves a displacement by more than 20 %, one they call no change by less
+    # than 5 %, in every context; the paper's contradiction (365 vs 24 cm^3) is 93 %.
+    same_abs_cm3: float = 1.0
+    same_rel: float = 0.05
+    contradiction_abs_cm3: float = 3.0
+    contradiction_rel: float = 0.2
 
 
 def contradiction(observed: torch.Tensor, expected: torch.Tensor, cfg: RulesConfig) -> torch.Tensor:
@@ -62,18 +79,40 @@ def contradiction(observed: torch.Tensor, expected: torch.Tensor, cfg: RulesConf
     return ((observed - expected).abs() > tol) & ~torch.isnan(expected)
 
 
+def outcome_unclear(observed: torch.Tensor, expected: torch.Tensor, cfg: RulesConfig) -> torch.Tensor:
+    """True where the outcome is neither as expected nor contradicted (the dead zone between the two tolerances)."""
+    same = torch.clamp(cfg.same_rel * expected.abs(), min=cfg.same_abs_cm3)
+    return ((observed - expected).abs() > same) & ~contradiction(observed, expected, cfg) & ~torch.isnan(expected)
+
+
 class CausalRules(nn.Module):
-    """Applies E/G/U/S per property and keeps the causal knowledge; batched over agents (leading dim B)."""
+    """Applies E/G/U/S per property and keeps the evidence and the causal knowledge; batched over agents (dim B).
+
+    buffers: the evidence, held (B, C, 2^P) and contradicted (B, C, 2^P) bool, the change sets (bit p: property p
+    changed) of the comparisons seen in context c whose outcome was as expected / contradicted, and
+    uncertain_count (B, P); and, derived from them after every `apply`, eliminated (B, C, P), dominant (B, C, P)
+    and state (B, P) (codes into STATES).
+    """
 
     def __init__(self, config: RulesConfig | None = None, batch: int = 1, properties=PROPERTIES):
         super().__init__()
         self.config = config or RulesConfig()
         self.properties = tuple(properties)
-        P = len(self.properties)
-        self.register_buffer("state", torch.zeros(batch, P, dtype=torch.long))
+        P, C = len(self.properties), len(CONTEXTS)
+        if P > 8:
+            raise ValueError(f"at most 8 properties (change sets are enumerated), got {P}")
+        self.register_buffer("held", torch.zeros(batch, C, 2 ** P, dtype=torch.bool))
+        self.register_buffer("contradicted", torch.zeros(batch, C, 2 ** P, dtype=torch.bool))
+        self.register_buffer("eliminated", torch.zeros(batch, C, P, dtype=torch.bool))
         self.register_buffer("uncertain_count", torch.zeros(batch, P, dtype=torch.long))
-        # dominance shown by a clean Growth: no later Elimination overturns it
-        self.register_buffer("proven", torch.zeros(batch, P, dtype=torch.bool))
+        self.register_buffer("dominant", torch.zeros(batch, C, P, dtype=torch.bool))
+        self.register_buffer("state", torch.zeros(batch, P, dtype=torch.long))
+        subsets = torch.arange(2 ** P)
+        bits = (subsets[:, None] >> torch.arange(P)) & 1                       # (2^P, P)
+        self.register_buffer("_bits", bits.bool(), persistent=False)
+        self.register_buffer("_weights", 1 << torch.arange(P), persistent=False)
+        self.register_buffer("_hits", (subsets[:, None] & subsets[None, :]) != 0, persistent=False)
+        self.register_buffer("_size", bits.sum(-1), persistent=False)
 
     @property
     def certainty(self) -> torch.Tensor:
@@ -85,54 +124,117 @@ class CausalRules(nn.Module):
 
     @torch.no_grad()
     def apply(self, delta_p: torch.Tensor, delta_c: torch.Tensor, compared: torch.Tensor,
-              strength: torch.Tensor | None = None) -> torch.Tensor:
-        """One episode of rule application.
+              strength: torch.Tensor | None = None, context: torch.Tensor | None = None) -> torch.Tensor:
+        """One comparison per agent: its evidence joins the agent's, and the knowledge is derived again.
 
         delta_p: (B, P) bool, property changed (bottom-up vs top-down); delta_c: (B,) bool, outcome contradicted;
         compared: (B,) bool, the agent recalled an episode to compare with (no recall: no rule fires);
-        strength: (B, P) hub pathway strengths to edit in place (optional).
-        Returns the rule fired per agent and property, codes into RULE_NAMES.
-        """
-        dp = delta_p & compared[:, None]
+        strength: (B, P) hub pathway strengths to rewrite from the knowledge (optional); context: (B,) long codes
+        into CONTEXTS (default MIXED, e.g. when the fates are not seen). A property eliminated in the context does
+        not retro-activate there, so it shows no change. Returns the rule fired per agent and property, codes into
+        RULE_NAMES (Uncertainty is reported only for an undecided property; its evidence is counted always)."""
+        B, P = self.state.shape
+        ctx = torch.full((B,), MIXED, dtype=torch.long, device=self.state.device) if context is None else context
+        rows = torch.arange(B, device=ctx.device)
+        dp = delta_p & compared[:, None] & ~self.eliminated[rows, ctx]
         dc = (delta_c & compared)[:, None]
-        undecided = (self.state == UNKNOWN) | (self.state == LIKELY_IRRELEVANT)
         fired = torch.full_like(self.state, STATUS_QUO)
         fired[dp & ~dc] = ELIMINATION
         fired[dp & dc] = GROWTH
-        # Uncertainty only examines undecided properties: for a decided one "no change, yet a contradiction" says
-        # nothing new (the contradiction is explained elsewhere).
+        undecided = (self.state == UNKNOWN) | (self.state == LIKELY_IRRELEVANT)
         fired[~dp & dc & undecided] = UNCERTAINTY
-
-        # clean: the only change among properties not already known to be irrelevant (a known-irrelevant change
-        # does not confound), or the only change at all (then the earlier Elimination was wrong)
-        suspects = dp & (self.state != IRRELEVANT)
-        n_suspects = suspects.sum(-1, keepdim=True)
-        alone = (suspects & (n_suspects == 1)) | ((n_suspects == 0) & (dp.sum(-1, keepdim=True) == 1))
-        clean = (fired == GROWTH) & alone
-        proven = self.proven
-        new = self.state.clone()
-        # Precedence: clean Growth > Elimination > ambiguous Growth > Uncertainty > unknown.
-        u = fired == UNCERTAINTY
-        self.uncertain_count += u.long()
-        new[u & undecided] = LIKELY_IRRELEVANT
-        ambiguous = (fired == GROWTH) & ~clean & (self.state != IRRELEVANT)
-        new[ambiguous & ~proven] = DOMINANT
-        new[(fired == ELIMINATION) & ~proven] = IRRELEVANT
-        new[clean] = DOMINANT
-        self.proven |= clean
-        self.state.copy_(new)
+        changed = (dp.long() * self._weights).sum(-1)                               # the change set's index
+        self.held[rows, ctx, changed] |= ~dc[:, 0] & dp.any(-1)
+        self.contradicted[rows, ctx, changed] |= dc[:, 0] & dp.any(-1)
+        self.uncertain_count += (~dp & dc).long()
+        self._derive()
         if strength is not None:
             strength.copy_(self.strength_from_knowledge(strength.dtype))
         return fired
 
+    def _derive(self) -> None:
+        """dominant and state from the evidence (a pure function of it: the order it came in cannot matter)."""
+        B, C, P = self.eliminated.shape
+        n = 2 ** P
+        sets = torch.arange(n, device=self.held.device)
+        single = self._size == 1
+        # Elimination is clean: a comparison where one property changed (besides ones already eliminated) and the
+        # outcome held. When several changed and the outcome held, their effects may cancel (larger but hollower):
+        # no verdict. Eliminating one can make another comparison clean, so repeat until nothing changes.
+        excl = torch.zeros(B, C, dtype=torch.long, device=sets.device)
+        for _ in range(P):
+            rest = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
+            rest.scatter_reduce_(2, sets & ~excl[..., None], self.held, reduce="amax")
+            new = excl | ((rest & single).long() * sets).sum(-1)
+            if torch.equal(new, excl):
+                break
+            excl = new
+        self.eliminated.copy_((excl[..., None] & self._weights) != 0)
+        # A property eliminated in one context is presumed irrelevant in the others too, unless a contradiction
+        # there can only be explained by it (Occam: no cause is added that the evidence does not need).
+        anywhere = torch.zeros_like(excl[:, 0])
+        for c in range(C):
+            anywhere |= excl[:, c]
+        presumed = excl | anywhere[:, None]
+        needs = (self.contradicted & ((sets & ~presumed[..., None]) == 0) & ((sets & ~excl[..., None]) != 0)).any(-1)
+        excl = torch.where(needs, excl, presumed)
+        # each contradicted change set without its excluded properties; an emptied set is noise nothing explains
+        eff = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
+        eff.scatter_reduce_(2, sets & ~excl[..., None], self.contradicted, reduce="amax")
+        eff[..., 0] = False
+        # an explanation uses no eliminated property and holds a changed property of every contradicted set
+        allowed = (sets & excl[..., None]) == 0                                       # (B, C, n)
+        explains = (~eff[:, :, None, :] | self._hits).all(-1) & allowed & (sets > 0)  # (B, C, n)
+        size = torch.where(explains, self._size, torch.full_like(self._size, P + 1))
+        minimal = explains & (size == size.min(-1, keepdim=True).values) & eff.any(-1, keepdim=True)
+        self.dominant.copy_((minimal[..., None] & self._bits).any(2))
+        state = torch.full_like(self.state, UNKNOWN)
+        state[self.uncertain_count > 0] = LIKELY_IRRELEVANT
+        state[self.eliminated.any(1)] = IRRELEVANT
+        state[self.dominant.any(1)] = DOMINANT
+        self.state.copy_(state)
+
     def strength_from_knowledge(self, dtype=torch.float32) -> torch.Tensor:
+        """(B, P) hub pathway strengths: dominant strengthened, irrelevant drastically reduced, likely irrelevant
+        marginally reduced per Uncertainty firing."""
         c = self.config
         s = c.uncertain_decay ** self.uncertain_count.to(dtype)
         s = torch.where(self.state == DOMINANT, torch.full_like(s, c.dominant_strength), s)
         return torch.where(self.state == IRRELEVANT, torch.full_like(s, c.eliminated_strength), s)
+
+    def context_strength(self, dtype=torch.float32) -> torch.Tensor:
+        """(B, C, P) the pathway strength within each context: eliminated there, or the agent's overall strength."""
+        s = self.strength_from_knowledge(dtype)[:, None, :].expand(self.eliminated.shape)
+        return torch.where(self.eliminated, torch.full_like(s, self.config.eliminated_strength), s)
 
     def knowledge(self, b: int = 0) -> dict:
         """Agent b's causal knowledge in the summary.json form: {property: {"state", "certainty"}}."""
         cert = self.certainty[b]
         return {p: {"state": STATES[int(self.state[b, i])], "certainty": round(float(cert[i]), 4)}
                 for i, p in enumerate(self.properties)}
+
+    def by_context(self, b: int = 0) -> dict:
+        """Agent b's knowledge per context: {context: {"dominant": [...], "irrelevant": [...]}}."""
+        return {c: {"dominant": [p for i, p in enumerate(self.properties) if self.dominant[b, k, i]],
+                    "irrelevant": [p for i, p in enumerate(self.properties) if self.eliminated[b, k, i]]}
+                for k, c in enumerate(CONTEXTS)}
+
+
+def batch_knowledge(delta_p: torch.Tensor, delta_c: torch.Tensor, context: torch.Tensor,
+                    config: RulesConfig | None = None) -> torch.Tensor:
+    """The batch answer: the knowledge (P,) state codes the rules reach when every pair of a set's episodes is
+    compared at once. delta_p (n, n, P) bool, delta_c (n, n) bool and context (n, n) long hold the comparison of
+    episode j with episode i at [i, j]; only i < j is read (a pair is compared once, at full strength)."""
+    n = delta_c.shape[0]
+    i, j = torch.triu_indices(n, n, offset=1)
+    rules = CausalRules(config, batch=len(i), properties=PROPERTIES[:delta_p.shape[-1]])
+    if len(i) == 0:
+        return torch.zeros(delta_p.shape[-1], dtype=torch.long)
+    rules.apply(delta_p[i, j], delta_c[i, j], torch.ones(len(i), dtype=torch.bool), context=context[i, j])
+    # every pair is one agent's single comparison; the set's evidence is their union
+    merged = CausalRules(config, batch=1, properties=rules.properties)
+    merged.held.copy_(rules.held.any(0, keepdim=True))
+    merged.contradicted.copy_(rules.contradicted.any(0, keepdim=True))
+    merged.uncertain_count.copy_(rules.uncertain_count.sum(0, keepdim=True))
+    merged._derive()
+    return merged.state[0]

@@ -119,6 +119,35 @@ class SelfOrganizingMap(nn.Module):
         a = torch.exp(-d2 / (2.0 * self.config.activity_sigma ** 2))
         return a.reshape(*x.shape[:-1], self.n_units)
 
+    def decode(self, activity: torch.Tensor, floor: float = 0.05) -> torch.Tensor:
+        """(..., n_units) graded activity -> (..., dim): the input that gives this activity, read from the population.
+
+        A single winner's codebook vector is only as fine as the map (one unit of a 1 x 30 log-mass map spans a
+        factor 1.3). Every unit's response is a gaussian of its distance to the input (`activity`), so
+        sigma^2 log a_u + |w_u|^2 / 2 = x . w_u - |x|^2 / 2 is linear in (x, |x|^2): the units active above
+        `floor` x the peak, weighted by their activity, give x by least squares, exactly for an unscaled or
+        uniformly scaled response (a retro-activated copy), closely for a truncated one. Where fewer than dim + 1
+        units respond, the activity-weighted mean of their codebook vectors. All-zero activity gives NaN."""
+        a = torch.as_tensor(activity, dtype=self.weights.dtype, device=self.weights.device)
+        if a.shape[-1] != self.n_units:
+            raise ValueError(f"activity must have last dimension {self.n_units}, got shape {tuple(a.shape)}")
+        shape = a.shape[:-1]
+        a = a.reshape(-1, self.n_units)
+        peak = a.amax(-1, keepdim=True)
+        on = (a >= floor * peak) & (peak > 0)
+        w = torch.where(on, a, torch.zeros_like(a))
+        mean = (w @ self.weights) / w.sum(-1, keepdim=True)                     # the fallback, NaN when silent
+        W, D = self.weights.double(), self.config.dim
+        lhs = torch.cat([W, torch.full_like(W[:, :1], -0.5)], -1)                 # (units, D + 1): [w_u, -1/2]
+        rhs = self.config.activity_sigma ** 2 * torch.where(on, a, torch.ones_like(a)).double().log() \
+            + 0.5 * (W * W).sum(-1)
+        sw = (w / peak.clamp_min(1e-30)).double()                                 # (N, units) weights
+        A = torch.einsum("nu,uf,ug->nfg", sw, lhs, lhs) + 1e-9 * torch.eye(D + 1, dtype=W.dtype)
+        b = torch.einsum("nu,uf,nu->nf", sw, lhs, rhs)
+        ok = on.sum(-1) > D
+        x = torch.linalg.solve(A, b)[:, :D].to(a.dtype) if ok.any() else mean
+        return torch.where(ok[:, None], x, mean).reshape(*shape, D)
+
     def quantization(self, x) -> torch.Tensor:
         """(..., dim) -> (..., dim): the codebook vector of each input's BMU."""
         return self.weights[self.winner(x)]

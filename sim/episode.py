@@ -34,6 +34,7 @@ class EpisodeOutcome:
     archimedes_cm3: float         # the closed-form yardstick (sim/objects.py), never shown to the agent
     goal_reachable_before: bool
     goal_reached_after: bool      # the ball reachable once everything settled
+    sank: bool                    # the object came to rest on the jar's bottom (False: it floats)
     settled: bool                 # False if the settle timeout ran out
     wall_s: float
     frames: list = field(default_factory=list)  # (H, W, 3) uint8 images if recording was asked
@@ -154,6 +155,7 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
         world.move_palm(world.robot.hand_pose()[0].numpy() + [0, 0, world.config.hover_cm * CM], waypoints=2)
         world.go_home()
         settled = world.settle()
+        sank = _rests_on_bottom(world, body)
         level_after = world.level_reading_cm()
         reached_after = world.goal_reachable()
     finally:
@@ -163,8 +165,15 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
         name=name, measurement={**seen, "mass_g": mass}, observed_cm3=(level_after - level_before) * area,
         level_before_cm=level_before, level_after_cm=level_after,
         archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
-        goal_reachable_before=reachable_before, goal_reached_after=reached_after, settled=settled,
+        goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
         wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [])
+
+
+def _rests_on_bottom(world, body: int) -> bool:
+    """What the robot sees in the jar once it is still: the object lies on the bottom (a contact with the jar's
+    floor plate pushing it up) or it floats."""
+    contacts = p.getContactPoints(body, world.tank.jar_body, -1, -1, physicsClientId=world.client)
+    return any(c[7][2] > 0.7 for c in contacts)   # contactNormalOnB, from the floor towards the object: up
 
 
 def inspect_object(world, name: str) -> dict:

@@ -60,17 +60,92 @@ def test_episode_3_grows_weight_makes_shape_and_size_uncertain_and_encodes(paper
     assert agent.memory.count.item() == 2  # episodes 1 and 3; episode 2 was not encoded
 
 
-def test_prediction_is_the_strength_weighted_average_of_recalled_rewards(paper):
+def cylinder(rgb, d, h, mass):
+    """A cylinder standing upright as the robot measures it, and what it displaces (Archimedes, fully covered)."""
+    volume = math.pi * d * d / 4 * h
+    m = lifted(rgb, mass, extent=sorted([d, d, h], reverse=True))
+    return m, min(mass, volume), mass > volume
+
+
+HAND_SET = [  # (rgb, diameter, height, mass): what each pair changes is in the comment
+    (RED, 5.0, 8.0, 400.0),      # sinks, 157.1 cm^3
+    (BLUE, 5.0, 8.0, 400.0),     # colour alone: same outcome
+    (RED, 5.0, 8.0, 40.0),       # weight alone: floats, 40
+    (RED, 3.5, 5.6, 400.0),      # size alone: sinks, 53.9
+    (RED, 5.0, 8.0, 80.0),       # floats, 80: weight alone against the 40 g one
+    (RED, 4.0, 6.4, 250.0),      # sinks, 80.4
+    (RED, 5.0, 8.0, 120.0),      # floats, 120
+]
+
+
+@pytest.fixture(scope="module")
+def hand_made():
+    agent = Agent(AgentConfig(seed=0))
+    for rgb, d, h, mass in HAND_SET:
+        m, v, sinks = cylinder(rgb, d, h, mass)
+        agent.step(m, torch.tensor([v]), torch.zeros(1, dtype=torch.bool), torch.zeros(1, dtype=torch.bool),
+                   sank=torch.tensor([sinks]))
+    return agent
+
+
+def test_knowledge_of_the_hand_made_set_by_context(hand_made):
+    k = hand_made.rules.by_context(0)
+    assert k["floating"]["dominant"] == ["weight"] and k["sinking"]["dominant"] == ["size"]
+    assert "color" in k["sinking"]["irrelevant"]
+    assert [hand_made.knowledge(0)[p]["state"] for p in ("color", "size", "weight")] == \
+        ["irrelevant", "dominant", "dominant"]
+
+
+@pytest.mark.parametrize("rgb, d, h, mass", [
+    (RED, 4.5, 7.2, 300.0),      # a sinker of a new size: its volume, 114.5
+    (RED, 5.0, 8.0, 60.0),       # a floater of a new weight: its mass, 60
+    ((0.1, 0.7, 0.2), 4.2, 6.72, 30.0),   # a green floater, new size and weight: 30
+    (RED, 5.0, 8.0, 160.0),      # heavier than any floater, lighter than its volume: it floats, 160
+])
+def test_readout_hits_archimedes_within_one_percent(hand_made, rgb, d, h, mass):
+    m, truth, _ = cylinder(rgb, d, h, mass)
+    assert hand_made.predict(m).item() == pytest.approx(truth, rel=0.01)
+
+
+def test_readout_takes_the_lesser_law_only_where_memory_supports_it():
+    """Features by hand (rgb, log fill, log size, log mass): floaters displace their mass, sinkers their volume
+    (fill x size^3). The fits follow weight for floaters and size for sinkers."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 3] = True              # floating: weight
+    agent.rules.dominant[0, 1, 2] = True              # sinking: size
+    fill = math.log(math.pi / 4)
+
+    def feat(size_cm, mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, fill, math.log(size_cm), math.log(mass_g)])
+
+    episodes = [(4.0, 10.0, 0), (4.5, 20.0, 0), (5.0, 40.0, 0), (3.0, 100.0, 1), (4.0, 200.0, 1), (5.0, 400.0, 1)]
+    xk = torch.stack([feat(s, m) for s, m, _ in episodes])[None]
+    y = torch.tensor([[m if f == 0 else math.pi / 4 * s ** 3 for s, m, f in episodes]])
+    fates = torch.tensor([[f for *_, f in episodes]])
+    w = torch.ones(1, len(episodes))
+    for size, mass in ((4.2, 25.0), (3.5, 300.0), (6.0, 90.0)):
+        got = agent.readout(feat(size, mass)[None], xk, y, fates, w).item()
+        assert got == pytest.approx(min(mass, math.pi / 4 * size ** 3), rel=1e-3)
+    # a memory where a floater displaced more than the sinkers' law predicts for it: no lesser law, the strongest
+    # recall's context (a sinker) decides
+    y_bad = y.clone()
+    y_bad[0, 2] = 150.0          # the 5 cm floater "displaced" 150, past its 98.2 cm^3 volume and the 20 % slack
+    w_bad = torch.tensor([[0.1, 0.1, 0.1, 0.1, 0.1, 1.0]])
+    got = agent.readout(feat(4.2, 25.0)[None], xk, y_bad, fates, w_bad).item()
+    assert got == pytest.approx(math.pi / 4 * 4.2 ** 3, rel=1e-3)
+
+
+def test_delta_property_sees_an_eliminated_pathway(paper):
     agent = paper[0]
-    m = lifted(RED, 100)  # a weight between the two stored cylinders' (14 g, 420 g)
-    a = agent.anticipate(m)
-    w = a.recall.strength[0] ** agent.config.prediction_sharpness * a.recall.valid[0]
-    by_hand = float((w * torch.nan_to_num(a.rewards[0])).sum() / w.sum())
-    assert a.recall.valid[0].sum() >= 1
-    assert agent.predict(m).item() == pytest.approx(by_hand)
-    # the stored objects themselves are predicted from their own episodes
-    assert agent.predict(lifted(RED, 420)).item() == pytest.approx(365, abs=8)
-    assert agent.predict(lifted(RED, 14)).item() == pytest.approx(24, abs=8)
+    red, blue = agent.decode(agent.activities(lifted(RED, 420))[0]), agent.decode(agent.activities(lifted(BLUE, 420))[0])
+    recalled = {p: v[:, None] for p, v in red.items()}
+    full = torch.ones(1, 1, 4)
+    changed, unclear = agent.delta_property(blue, recalled, full)
+    assert changed[0, 0].tolist() == [True, False, False, False] and not unclear.any()
+    eliminated = full.clone()
+    eliminated[..., 0] = agent.config.rules.eliminated_strength     # colour no longer retro-activates
+    changed, unclear = agent.delta_property(blue, recalled, eliminated)
+    assert not changed.any() and not unclear.any()
 
 
 def test_nothing_recalled_predicts_nan():

@@ -6,7 +6,7 @@ import math
 import pytest
 import torch
 
-from aesop_torch.hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode
+from aesop_torch.hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
 
 MAPS = {"color": 4, "shape": 3, "size": 3, "weight": 5, "word": 6}
 C, SH, SI, W, WD = range(5)
@@ -196,14 +196,17 @@ def test_hub_full_raises():
 
 def test_reward_code_round_trip():
     code = RewardCode()
-    assert code.step == 2.0
+    step = math.log(2000.0 / 0.5) / 624                 # 625 levels from 0.5 to 2000 cm^3, a log scale
+    assert code.step == pytest.approx(step)
     row = code.encode(torch.tensor(365.0))
     assert row.sum() == 2
-    # 365 / 2 = 182.5 rounds half up to level 183: coarse unit 7 (183 // 25), fine unit 25 + 8 (183 % 25)
-    assert row.nonzero().flatten().tolist() == [7, 33]
-    assert code.decode(row).item() == 366.0
-    vals = torch.tensor([[0.0, 24.0, 364.0], [1248.0, 2000.0, -3.0]])
-    assert code.decode(code.encode(vals)).tolist() == [[0.0, 24.0, 364.0], [1248.0, 1248.0, 0.0]]
+    level = round(math.log(365.0 / 0.5) / step)        # 496: coarse unit 19 (496 // 25), fine unit 25 + 21
+    assert row.nonzero().flatten().tolist() == [level // 25, 25 + level % 25]
+    assert code.decode(row).item() == pytest.approx(0.5 * math.exp(level * step), rel=1e-6)
+    vals = torch.tensor([[2.0, 24.0, 364.0], [1248.0, 5000.0, -3.0]])
+    back = code.decode(code.encode(vals))
+    assert torch.allclose(back[0], vals[0], rtol=step / 2 + 1e-6)   # within half a step: 0.67 %
+    assert back[1].tolist() == pytest.approx([1248.0, 2000.0, 0.5], rel=step / 2)   # clamped to 0.5..2000
 
 
 def test_reward_decode_flags_invalid_rows():
@@ -214,12 +217,30 @@ def test_reward_decode_flags_invalid_rows():
     rows[2, [3, 4, 30]] = 1.0                      # two coarse units
     rows[3, [30, 31]] = 1.0                        # no coarse unit
     out = code.decode(rows)
-    assert math.isnan(out[0]) and out[1].item() == (3 * 25 + 5) * 2 and math.isnan(out[2]) and math.isnan(out[3])
+    assert math.isnan(out[0]) and math.isnan(out[2]) and math.isnan(out[3])
+    assert out[1].item() == pytest.approx(0.5 * math.exp((3 * 25 + 5) * code.step), rel=1e-6)
     with pytest.raises(ValueError, match="finite"):
         code.encode(torch.tensor([float("nan")]))
 
 
-@pytest.mark.parametrize("hub", [ActionHub(), BodyHub()])
+def test_graded_storage_keeps_the_bump_and_matches_it_again():
+    hub = ObjectHub({"a": 5, "b": 5}, HubConfig(assembly_size=5), batch=1)
+    bump = torch.tensor([[[0.02, 0.3, 1.0, 0.3, 0.02], [0.0, 0.0, 0.5, 1.0, 0.5]]])
+    assembly = hub.allocate(bump, torch.ones(1, 2, dtype=torch.bool), torch.ones(1, dtype=torch.bool))
+    k = int(assembly[0].nonzero()[0])
+    # the bump relative to its peak, units below store_floor (0.05) left out
+    assert hub.W[0, 0, :, k].tolist() == pytest.approx([0.0, 0.3, 1.0, 0.3, 0.0])
+    assert hub.W[0, 1, :, k].tolist() == pytest.approx([0.0, 0.0, 0.5, 1.0, 0.5])
+    present = torch.ones(1, 2, dtype=torch.bool)
+    assert hub.bottom_up(bump, present)[0, assembly[0]].tolist() == pytest.approx([1.0] * 5)
+    # map a's bump moved one unit: its match is (W . a') / (W . W) = (0.3 + 0.3) / 1.18, map b still 1
+    moved = bump.clone()
+    moved[0, 0] = torch.tensor([0.0, 0.02, 0.3, 1.0, 0.3])
+    expect = (0.5 * (0.3 * 0.02 + 1.0 * 0.3 + 0.3 * 1.0) / 1.18 + 0.5 * 1.0)
+    assert hub.bottom_up(moved, present)[0, k].item() == pytest.approx(expect, rel=1e-5)
+
+
+@pytest.mark.parametrize("hub", [ActionHub(), BodyHub(), Fate()])
 def test_named_two_hot_codes_round_trip(hub):
     codes = hub.encode(list(hub.names))
     assert codes.shape == (len(hub.names), 50) and (codes.sum(-1) == 2).all()

@@ -64,8 +64,9 @@ def test_empty_memory_and_unknown_cue_recall_nothing():
 
 
 def test_graded_cue_recalls_the_episode_with_the_cue_strength():
-    # an object differing in one property of four: 0.75 on the stored assembly, a little activity elsewhere
-    q = cue((A, 0.75)) + 0.05 * (1 - A[OBJ].float())
+    # an object differing in one property of four: 0.75 on the stored assembly, a little activity elsewhere (below
+    # MemoryConfig.min_strength: not a memory of the cue)
+    q = cue((A, 0.75)) + 0.03 * (1 - A[OBJ].float())
     out = memory(A, B, Cc).recall(q)
     assert out.valid[0].sum() == 1 and torch.equal(out.episodes[0, 0], A)
     assert out.strength[0, 0].item() == pytest.approx(0.75)

@@ -39,6 +39,7 @@ def outcome_record(outcome) -> dict:
         "archimedes_cm3": float(outcome.archimedes_cm3),
         "goal_before": bool(outcome.goal_reachable_before),
         "goal_after": bool(outcome.goal_reached_after),
+        "sank": bool(outcome.sank),
     }
 
 
@@ -67,7 +68,7 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         m, v = sensed(s)
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
-                            "goal_before": False, "goal_after": v > reachable_above_cm3}
+                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks)}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
     return outcomes, probes
@@ -137,7 +138,8 @@ class Experiment:
         observed = torch.tensor([o["observed_cm3"] for o in outs])
         before = torch.tensor([o["goal_before"] for o in outs])
         after = torch.tensor([o["goal_after"] for o in outs])
-        res = self.agent.step(meas, observed, before, after)
+        sank = torch.tensor([o["sank"] for o in outs]) if all("sank" in o for o in outs) else None
+        res = self.agent.step(meas, observed, before, after, sank=sank)
         fired = res.rules_fired()
         probe_err = self.probe_errors()
         new = []

@@ -253,6 +253,7 @@ class _Walk:
         self.observed = torch.tensor([r["observed_cm3"] for r in recs])
         self.before = torch.tensor([r["goal_before"] for r in recs])
         self.after = torch.tensor([r["goal_after"] for r in recs])
+        self.sank = torch.tensor([r["sank"] for r in recs]) if all("sank" in r for r in recs) else None
         self.probe_meas = [stack_measurements([probes[name]["measurement"]]) for name in probe_names]
         self.truth = torch.tensor([probes[name]["archimedes_cm3"] for name in probe_names])
         self.keys: list = [None] * self.N
@@ -277,7 +278,7 @@ class _Walk:
             obj = trie.rows[first, t]
             tic = time.perf_counter()
             child.step({k: v[obj] for k, v in self.meas.items()}, self.observed[obj], self.before[obj],
-                       self.after[obj])
+                       self.after[obj], sank=None if self.sank is None else self.sank[obj])
             self.step_s += time.perf_counter() - tic
             self.agent_steps += len(first)
             if t + 1 < self.n:
