@@ -12,10 +12,12 @@ or another write error: one line, exit code 1; either way the last checkpoint is
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import re
 import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
@@ -142,9 +144,28 @@ def check_out(out: Path, resume: bool) -> None:
         if not os.access(p, os.W_OK | os.X_OK):
             raise UsageError(f"--out {out}: {p} is not writable")
         if p == out and any(e.name != LOCK_NAME for e in os.scandir(out)):
-            raise UsageError(f"--out {out} already holds files; use --resume to continue it or another --out")
+            busy = _lock_holder(out)
+            raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else
+                             f"--out {out} already holds files; use --resume to continue it or another --out")
     if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
         raise UsageError(f"--out {out} is not writable")
+
+
+def _lock_holder(out: Path) -> str | None:
+    """The pid written in DIR/.lock while a run holds it, else None. Only reads."""
+    import fcntl
+
+    try:
+        fd = os.open(out / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return None
+    except BlockingIOError:
+        return os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+    finally:
+        os.close(fd)   # closing drops the probe's shared lock, if it got one
 
 
 def lock_out(out: Path) -> int:
@@ -166,8 +187,9 @@ def lock_out(out: Path) -> int:
 
 
 def prepare(args, objects, n_orders: int):
-    """Validate the rest (needs torch) and return (experiment, resumed). Locks --out first, so that a checkpoint is
-    read and verified only by the run that owns it; nothing else is written before everything is checked."""
+    """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
+    checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
+    checked."""
     from train.experiment import Experiment, draw_orders
     from train.summary import FULL_RUNS
 
@@ -175,22 +197,25 @@ def prepare(args, objects, n_orders: int):
         raise UsageError(f"--physics per-episode with {n_orders} orders would simulate "
                          f"{n_orders * len(objects.train)} drops; more than {FULL_RUNS} orders run as a population "
                          "on cached physics")
-    created = not args.out.exists()
-    lock_out(args.out)
+    created = [d for d in [args.out, *args.out.parents] if not d.exists()]   # innermost first
+    lock = lock_out(args.out)
     try:
         if args.resume:
-            return resume_experiment(args, objects), True
+            return resume_experiment(args, objects), True, lock
         if any(e.name != LOCK_NAME for e in os.scandir(args.out)):   # filled since check_out: another run's
             raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
-    except UsageError:
-        if created:   # refused after all: leave nothing behind
+        # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
+        orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
+        return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
+                          physics=args.physics), False, lock
+    except BaseException:
+        os.close(lock)
+        if created:   # refused or interrupted after all: leave nothing behind (rmdir: only if still empty)
             (args.out / LOCK_NAME).unlink(missing_ok=True)
-            args.out.rmdir()
+            for d in created:
+                with contextlib.suppress(OSError):
+                    d.rmdir()
         raise
-    # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
-    orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
-    return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
-                      physics=args.physics), False
 
 
 def resume_experiment(args, objects):
@@ -222,15 +247,43 @@ def main(argv=None) -> int:
             print(f"train/run.py: {'resuming' if args.resume else 'starting'} {n_orders:,} order(s) of "
                   f"{len(objects.train)} object(s), physics {args.physics}, seed {args.seed} -> {args.out}",
                   flush=True)
-            exp, resumed = prepare(args, objects, n_orders)
+            exp, resumed, lock = prepare(args, objects, n_orders)
         except UsageError as e:
             print(f"train/run.py: error: {e}", file=sys.stderr)
             return 2
-        return run(args, exp, objects, resumed)
+        except OSError as e:   # creating --out or its lock failed (a full disk, a race with another program)
+            print(f"train/run.py: error: {_os_error(e)}", file=sys.stderr)
+            return 1
+        try:
+            return run(args, exp, objects, resumed)
+        finally:
+            os.close(lock)   # the kernel would at exit; a caller of main() in-process may start another run
     except KeyboardInterrupt:   # before the run started: nothing of value was written
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-        print("train/run.py: interrupted before the run started", file=sys.stderr)
+        with _sigint_ignored():
+            print(f"{_fresh_line()}train/run.py: interrupted before the run started", file=sys.stderr)
         return 130
+
+
+@contextlib.contextmanager
+def _sigint_ignored():
+    """A second Ctrl-C must not interrupt the clean-up after the first (only the main thread may set handlers)."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _fresh_line() -> str:
+    """A newline on a terminal, where a progress bar (or ^C) may have left the cursor mid-line; nothing in a log."""
+    return "\n" if sys.stdout.isatty() else ""
+
+
+def _os_error(e: OSError) -> str:
+    where = f" {e.filename}" if e.filename else ""
+    return f"cannot write{where}: {e.strerror or e}"
 
 
 def run(args, exp, objects, resumed: bool) -> int:
@@ -247,12 +300,14 @@ def run(args, exp, objects, resumed: bool) -> int:
     try:
         return _run(args, exp, objects, resumed, out, ckpt, saved, t0)
     except KeyboardInterrupt:
-        signal.signal(signal.SIGINT, signal.SIG_IGN)   # a second Ctrl-C must not interrupt the clean-up
-        print(f"\ntrain/run.py: interrupted; {last_checkpoint()}", file=sys.stderr)
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: interrupted; {last_checkpoint()}", file=sys.stderr)
         return 130
-    except OSError as e:
-        where = f" {e.filename}" if e.filename else ""
-        print(f"\ntrain/run.py: error: cannot write{where}: {e.strerror or e}; {last_checkpoint()}", file=sys.stderr)
+    except OSError as e:   # a full disk (ENOSPC) or another write error: the checkpoint is written atomically
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: error: {_os_error(e)}; {last_checkpoint()}", file=sys.stderr)
         return 1
     finally:
         _close_quietly()
