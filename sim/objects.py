@@ -211,7 +211,9 @@ def load_objects(path, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     (a regular file of at most MAX_FILE_BYTES: `/dev/zero` or a pipe is refused, not read forever), and so are
     nesting depth and integer length, which would otherwise end in a RecursionError or an OverflowError."""
     try:
-        with open(path, "rb") as f:
+        # O_NONBLOCK: opening a FIFO must not wait for a writer; a regular file reads as usual
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise ObjectsFileError("the objects file is not a regular file")
             raw = f.read(MAX_FILE_BYTES + 1)

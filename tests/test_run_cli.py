@@ -108,10 +108,13 @@ def test_oversized_file_is_refused(tmp_path):
     refused(tmp_path, json.dumps({"train": [GOOD], "_comment": "x" * 1_000_001}), "larger than 1,000,000 bytes")
 
 
-def test_device_file_is_refused_not_read_forever(tmp_path):
-    r = run("--objects", "/dev/zero", "--out", str(tmp_path / "o"))
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "not a regular file" in r.stderr
-    assert not (tmp_path / "o").exists()
+def test_device_file_and_pipe_are_refused_not_read_forever(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)   # no writer: opening it for reading would wait for ever
+    for objects in ("/dev/zero", str(fifo)):
+        r = run("--objects", objects, "--out", str(tmp_path / "o"))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "not a regular file" in r.stderr
+        assert not (tmp_path / "o").exists()
 
 
 @pytest.mark.parametrize("name", ["evil\n", "x" * 65, "../up", "", "caf\u00e9"])
