@@ -295,7 +295,7 @@ def run(args, exp, objects, resumed: bool) -> int:
         if saved["t"] is None:
             return "no checkpoint was written yet: run the same command again (with another --out, or remove it)"
         return (f"the last checkpoint ({ckpt}, {saved['t']} of {exp.n_episodes} episodes) is intact: "
-                f"run the same command with --resume to continue")
+                f"continue with the same flags and --resume --out {out}")
 
     try:
         return _run(args, exp, objects, resumed, out, ckpt, saved, t0)
