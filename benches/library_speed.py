@@ -4,7 +4,7 @@
 
 Prints the median over repeats of `load_experiment("checkpoints/default.pt")` (imports already done), of the same in
 a fresh interpreter (imports included: what a user's script pays once), and of `Experiment.predict` for one object
-(4 agents, one per order), beside the peer: the load as it was before (the agents re-trained their property maps,
+(4 agents, one per order; with torch's default threads and with one), beside the peer: the load as it was before (the agents re-trained their property maps,
 which the checkpoint then overwrote). The last line is `load_s=X predict_ms=Y`. Printed, never asserted.
 """
 
@@ -48,6 +48,10 @@ def main():
     exp.predict(objects[0])
     per_object = [median_s(lambda m=m: exp.predict(m), 30) for m in objects]
     predict_ms = 1e3 * statistics.median(per_object)
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)   # 4 agents are small tensors: a second thread mostly waits for a busy core
+    one_thread_ms = 1e3 * statistics.median([median_s(lambda m=m: exp.predict(m), 30) for m in objects])
+    torch.set_num_threads(threads)
 
     state = torch.load(CKPT, weights_only=True)["experiment"]
 
@@ -63,7 +67,7 @@ def main():
           f"{old_s * 1e3:.1f} ms)")
     print(f"  in a fresh process    {statistics.median(cold) * 1e3:8.1f} ms  (imports included, median of 3)")
     print(f"predict, one object     {predict_ms:8.2f} ms  (median over {len(objects)} objects of the median of 30; "
-          f"{len(exp.orders)} agents at once)")
+          f"{len(exp.orders)} agents at once; {one_thread_ms:.2f} ms on 1 torch thread)")
     print(f"load_s={load_s:.4f} predict_ms={predict_ms:.3f}")
 
 

@@ -196,6 +196,15 @@ class Experiment:
 
 
 def load_experiment(path) -> Experiment:
-    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt) as a live Experiment, agents included."""
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
+    Experiment, agents included.
+
+    Runs on one torch thread (restored after): building a few agents is hundreds of tiny ops, and on a busy 2-core
+    machine a second thread made each of them wait (measured: 0.8 ms on one thread, 12-150 ms on two)."""
     from train.checkpoint import load
-    return Experiment.from_state_dict(load(path)["experiment"])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return Experiment.from_state_dict(load(path)["experiment"])
+    finally:
+        torch.set_num_threads(threads)
