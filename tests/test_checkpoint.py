@@ -186,8 +186,17 @@ def test_wrong_structure_is_refused_in_one_line(saved, tmp_path, edit, words):
     assert words in str(e.value) and "\n" not in str(e.value)
 
 
+def test_an_older_unchecksummed_checkpoint_is_refused_until_upgraded(saved, tmp_path):
+    state = ck.load(saved[0])
+    torch.save(state, tmp_path / "old.pt")     # what this code wrote before checkpoints had a format and checksum
+    with pytest.raises(ck.CheckpointError, match="older version"):
+        ck.load(tmp_path / "old.pt")
+    ck.upgrade(tmp_path / "old.pt")
+    assert ck.digest(ck.load(tmp_path / "old.pt")) == ck.digest(state)
+
+
 def test_foreign_and_oversized_files_are_refused(saved, tmp_path, monkeypatch):
-    torch.save({"run": {}, "experiment": {}}, tmp_path / "old.pt")          # no format tag: foreign (or too old)
+    torch.save({"run": {}, "experiment": {}, "x": 1}, tmp_path / "old.pt")   # no format tag: foreign
     torch.save([1, 2, 3], tmp_path / "list.pt")
     (tmp_path / "text.pt").write_text("not a checkpoint")
     for name in ("old.pt", "list.pt", "text.pt"):

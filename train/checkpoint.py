@@ -135,6 +135,9 @@ def load(path: str | os.PathLike) -> dict:
     except Exception as e:  # noqa: BLE001  a damaged or foreign file can fail in many ways; each is one line
         raise CheckpointError(f"{path} is not a readable checkpoint (damaged or foreign: {type(e).__name__})"
                               ) from None
+    if isinstance(raw, dict) and set(raw) == {"run", "experiment"}:
+        raise CheckpointError(f"{path} is a checkpoint of an older version, without a checksum: remake it, or "
+                              f"convert it if you trust it (train.checkpoint.upgrade)")
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not an aesop-torch checkpoint (no format tag {FORMAT!r})")
     if raw.get("version") != VERSION:
@@ -153,6 +156,19 @@ def load(path: str | os.PathLike) -> dict:
     if problem:
         raise CheckpointError(f"{path}: wrong structure: {problem}")
     return state
+
+
+def upgrade(path: str | os.PathLike) -> None:
+    """Rewrite in place a checkpoint written before checksums ({"run", "experiment"} only) in today's format, after
+    the structure check. Its content cannot be verified: use it on files you trust (e.g. a shipped default)."""
+    import torch
+
+    raw = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(raw, dict) or set(raw) != {"run", "experiment"}:
+        raise CheckpointError(f"{path} is not a checkpoint of the older version")
+    if problem := structure_problem(raw):
+        raise CheckpointError(f"{path}: wrong structure: {problem}")
+    save_atomic(raw, path)
 
 
 def _typed(d: dict, spec: dict, where: str) -> str | None:
