@@ -217,3 +217,15 @@ def test_ctrl_c_in_a_terminal_ends_with_one_line_workers_included(tmp_path):
     r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=120)
     assert r.returncode == 0, r.stderr
     assert len(json.loads((out / "summary.json").read_text())["runs"][0]["episodes"]) == 2
+
+
+def test_everything_before_the_first_line_runs_without_torch(tmp_path):
+    # the first line must come within a second: flags, the objects file and --out are checked before torch (about a
+    # second to import) is loaded
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); from train import run; "
+            "a = run.parse_args(['--out', sys.argv[2]]); o = run.load_objects_or_fail(a.objects); "
+            "run.count_orders(len(o.train), a.orders); run.check_out(a.out, a.resume); "
+            "print(sorted(m for m in ('torch', 'tensorboard', 'matplotlib') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code, str(ROOT), str(tmp_path / "o")], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", (r.stdout, r.stderr)
