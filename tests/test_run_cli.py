@@ -209,7 +209,7 @@ def test_ctrl_c_in_a_terminal_ends_with_one_line_workers_included(tmp_path):
     p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
     while "simulating" not in (line := p.stdout.readline()):
         assert line, p.stderr.read()
-    time.sleep(1.0)   # the workers are starting up or simulating
+    time.sleep(0.5)   # the workers are starting up or simulating
     os.killpg(p.pid, signal.SIGINT)
     _, err = p.communicate(timeout=60)
     lines = err.strip().splitlines()
