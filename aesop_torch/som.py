@@ -4,7 +4,7 @@ The paper trains its maps "using standard SOM procedure" and gives no numbers, s
 MiniSom (JustGlowing/minisom 2.3), the reference implementation most people compare against:
 - units are laid out row-major: unit u sits at grid (u // cols, u % cols);
 - gaussian neighbourhood exp(-d_grid^2 / (2 sigma^2));
-- online `train`: one sample per iteration, learning rate and radius both decay as x / (1 + t / (T / 2))
+- online `train_online`: one sample per iteration, learning rate and radius both decay as x / (1 + t / (T / 2))
   (MiniSom's default `asymptotic_decay`, which ends at a third of the start value);
 - quantization error: mean distance from a sample to its best matching unit (BMU);
 - topographic error: fraction of samples whose best and second-best units are not grid neighbours (8-neighbours
@@ -44,7 +44,7 @@ class SOMConfig:
     # final radius of batch training; at 0.5 a neighbour gets weight exp(-2) = 0.14, enough to keep the map
     # ordered while each unit settles near the mean of its own samples (low quantization error).
     sigma_end: float = 0.5
-    # start learning rate of online `train` (MiniSom's default); it decays to a third by the end.
+    # start learning rate of online `train_online` (MiniSom's default); it decays to a third by the end.
     learning_rate: float = 0.5
     # width of the graded activity, in input units. Set per map to about the spacing between neighbouring
     # codebook vectors (see encoders.default_map_configs): the same input activates its own unit near 1, a value
@@ -203,8 +203,9 @@ class SelfOrganizingMap(nn.Module):
 
     # -- training -----------------------------------------------------------------------------------------------
     @torch.no_grad()
-    def train(self, data, num_iteration: int, generator: torch.Generator) -> None:
-        """Online SOM exactly as MiniSom's `train(..., random_order=True)`: sample t is data[perm[t] mod N]
+    def train_online(self, data, num_iteration: int, generator: torch.Generator) -> None:
+        """Online SOM exactly as MiniSom's `train(..., random_order=True)` (named train_online so that
+        nn.Module.train(mode) keeps working on any model holding a map): sample t is data[perm[t] mod N]
         (every sample equally often, order drawn from the generator), w += eta(t) h(t) (x - w), with eta and
         sigma decaying as x / (1 + 2 t / T)."""
         data = self._input(data, "data")
@@ -236,7 +237,7 @@ class SelfOrganizingMap(nn.Module):
         if generator is None:
             raise ValueError("fit needs a generator when ordering_iterations > 0")
         self.init_weights(data, generator)
-        self.train(data, cfg.ordering_iterations, generator)
+        self.train_online(data, cfg.ordering_iterations, generator)
         self.train_batch(data, epochs, sigma=cfg.sigma / 3.0)
 
     @torch.no_grad()

@@ -1,4 +1,4 @@
-"""The objects file (SPEC.md "Objects file"): parse it, refuse a bad one, and give each object its geometry.
+"""The objects file (CONTRACTS.md "Objects file"): parse it, refuse a bad one, and give each object its geometry.
 
 Units are the file's: cm, g, g/cm^3 (the world converts to metres and kilograms).
 
@@ -23,7 +23,9 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import re
+import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -52,7 +54,11 @@ PALETTE = {
     "cyan": (0.10, 0.80, 0.85),
 }
 
-NAME_RE = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.-]*$")  # names become directory names for saved frames
+NAME_RE = re.compile(r"[A-Za-z0-9][A-Za-z0-9_.-]*", re.ASCII)  # names become directory names for saved frames
+MAX_NAME_CHARS = 64          # a name is a directory name for saved frames, and a label in figures and logs
+MAX_FILE_BYTES = 1_000_000   # the default file is 2 kB; a file a thousand times larger is not an objects file
+MAX_NESTING = 32             # the schema nests 4 deep; deeper input would only exhaust the parser's recursion
+MAX_DIGITS = 32              # digits of an integer literal; a 400-digit mass would overflow the float conversion
 OBJECT_KEYS = {"name", "shape", "color", "dims_cm", "mass_g"}
 JAR_KEYS = {"inner_diameter_cm", "height_cm", "water_depth_cm"}
 TOP_KEYS = {"jar", "train", "probe"}
@@ -64,7 +70,7 @@ class ObjectsFileError(ValueError):
 
 @dataclass(frozen=True)
 class ObjectsConfig:
-    # SPEC.md's example jar (12 cm wide, 14 cm of water) but 19.5 cm tall, fitted to the robot's reach (sim/world.py):
+    # CONTRACTS.md's example jar (12 cm wide, 14 cm of water) but 19.5 cm tall, fitted to the robot's reach (world.py):
     # the iCub's hand cannot enter the mouth, so the ball is reachable once its top floats up to the rim; it starts
     # 2.2 cm below, the paper's heavy cylinder (+3.2 cm) brings it up, a 14 g float (+0.1 cm) does not.
     default_jar: tuple[float, float, float] = (12.0, 19.5, 14.0)  # inner diameter, height, water depth (cm)
@@ -201,16 +207,50 @@ def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
 # -- parsing ---------------------------------------------------------------------------------------------------------
 
 def load_objects(path, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
-    """Read and validate an objects file; ObjectsFileError (one line) if anything is wrong."""
+    """Read and validate an objects file; ObjectsFileError (one line) if anything is wrong. Reading is bounded
+    (a regular file of at most MAX_FILE_BYTES: `/dev/zero` or a pipe is refused, not read forever), and so are
+    nesting depth and integer length, which would otherwise end in a RecursionError or an OverflowError."""
     try:
-        text = Path(path).read_text()
+        # O_NONBLOCK: opening a FIFO must not wait for a writer; a regular file reads as usual
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ObjectsFileError("the objects file is not a regular file")
+            raw = f.read(MAX_FILE_BYTES + 1)
+        if len(raw) > MAX_FILE_BYTES:
+            raise ObjectsFileError(f"the objects file is larger than {MAX_FILE_BYTES:,} bytes")
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as e:
         raise ObjectsFileError(f"cannot read the objects file: {type(e).__name__}: {e}") from None
+    depth = _nesting(text)
+    if depth > MAX_NESTING:
+        raise ObjectsFileError(f"the objects file nests {depth} levels deep (at most {MAX_NESTING})")
     try:
-        data = json.loads(text)
+        data = json.loads(text, parse_int=_bounded_int)
     except json.JSONDecodeError as e:
         raise ObjectsFileError(f"malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
+    except RecursionError:
+        raise ObjectsFileError(f"the objects file nests too deeply (at most {MAX_NESTING} levels)") from None
     return parse_objects(data, config)
+
+
+def _bounded_int(literal: str) -> int:
+    if len(literal.lstrip("-")) > MAX_DIGITS:
+        raise ObjectsFileError(f"an integer of {len(literal.lstrip('-'))} digits (at most {MAX_DIGITS}): "
+                               f"{literal[:12]}...")
+    return int(literal)
+
+
+def _nesting(text: str) -> int:
+    """The deepest nesting of [ and { outside strings (the file is not yet known to be valid JSON)."""
+    depth = deepest = 0
+    for c in re.sub(r'"(?:[^"\\]|\\.)*"', "", text):
+        if c in "[{":
+            depth += 1
+            deepest = max(deepest, depth)
+        elif c in "]}":
+            depth -= 1
+    return deepest
 
 
 def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
@@ -288,9 +328,10 @@ def _parse_object(item, where: str, jar: JarSpec, config: ObjectsConfig) -> Obje
     if not isinstance(item, dict):
         raise ObjectsFileError(f"{where}: must be an object with name, shape, color, dims_cm, mass_g")
     name = item.get("name")
-    if not isinstance(name, str) or not NAME_RE.match(name):
-        raise ObjectsFileError(f"{where} field 'name': must be letters, digits, '_', '.', '-' "
-                               f"(it names a directory), not {json.dumps(name)}")
+    if not isinstance(name, str) or not NAME_RE.fullmatch(name) or len(name) > MAX_NAME_CHARS:
+        shown = json.dumps(name if not isinstance(name, str) or len(name) <= MAX_NAME_CHARS else name[:40] + "...")
+        raise ObjectsFileError(f"{where} field 'name': must be 1 to {MAX_NAME_CHARS} letters, digits, '_', '.', "
+                               f"'-' starting with a letter or digit (it names a directory), not {shown}")
     where = f"object '{name}'"
     _no_unknown_keys(item, OBJECT_KEYS, where)
     for k in ("shape", "color", "dims_cm", "mass_g"):

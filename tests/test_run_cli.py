@@ -1,8 +1,12 @@
-"""train/run.py refuses bad input with one line on stderr, exit code 2, and writes nothing."""
+"""train/run.py refuses bad input with one line on stderr, exit code 2, and writes nothing; one class of bad input
+per test (objects file, its bounds, flags, --out, a busy --out), and Ctrl-C ends in one line."""
 
 import json
+import os
+import signal
 import subprocess
 import sys
+import time
 from pathlib import Path
 
 import pytest
@@ -87,3 +91,141 @@ def test_gui_without_a_display_is_refused_instead_of_hanging(tmp_path, monkeypat
     r = run("--gui", "--out", str(tmp_path / "o"))
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "DISPLAY" in r.stderr, r.stderr
     assert not (tmp_path / "o").exists()
+
+
+# -- bounds on the objects file: every one refused in one line, before anything is read without bound -----------------
+
+def test_huge_integer_is_refused(tmp_path):
+    refused(tmp_path, '{"train": [{"name": "a", "shape": "cube", "color": "red", "dims_cm": [5], "mass_g": '
+            + "9" * 400 + "}]}", "400 digits")
+
+
+def test_deep_nesting_is_refused(tmp_path):
+    refused(tmp_path, '{"train": ' + "[" * 200_000 + "]" * 200_000 + "}", "nests", "200001")
+
+
+def test_oversized_file_is_refused(tmp_path):
+    refused(tmp_path, json.dumps({"train": [GOOD], "_comment": "x" * 1_000_001}), "larger than 1,000,000 bytes")
+
+
+def test_device_file_and_pipe_are_refused_not_read_forever(tmp_path):
+    fifo = tmp_path / "fifo"
+    os.mkfifo(fifo)   # no writer: opening it for reading would wait for ever
+    for objects in ("/dev/zero", str(fifo)):
+        r = run("--objects", objects, "--out", str(tmp_path / "o"))
+        assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "not a regular file" in r.stderr
+        assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("name", ["evil\n", "x" * 65, "../up", "", "caf\u00e9"])
+def test_bad_names_are_refused(tmp_path, name):
+    refused(tmp_path, json.dumps({"train": [obj(name=name)]}), "field 'name'", "64")
+
+
+def test_a_64_character_name_is_accepted():
+    from sim.objects import parse_objects
+    assert parse_objects({"train": [obj(name="x" * 64)]}).train[0].name == "x" * 64
+
+
+# -- flags ----------------------------------------------------------------------------------------------------------
+
+@pytest.mark.parametrize("args, words", [
+    (["--orders", "\u00b2"], "--orders"),                # str.isdigit() accepts a superscript two
+    (["--orders", "\u0663"], "--orders"),                # an Arabic-Indic three: int() would accept it
+    (["--orders", "1000000000"], "1,000,000"),
+    (["--orders", "1000001"], "1,000,000"),
+    (["--orders", " 4"], "--orders"),
+    (["--seed", "18446744073709551616"], "2**63"),
+    (["--seed", "9223372036854775808"], "2**63"),
+    (["--seed", "1e3"], "--seed"),
+    (["--seed", "9" * 5000], "--seed"),
+])
+def test_out_of_range_flags_are_refused(tmp_path, args, words):
+    r = run(*args, "--out", str(tmp_path / "o"))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and words in lines[0], r.stderr
+    assert r.stdout == "" and not (tmp_path / "o").exists()
+
+
+def test_all_orders_of_too_many_objects_are_refused(tmp_path):
+    many = [obj(name=f"o{i}") for i in range(10)]   # 10! = 3,628,800 orders
+    f = tmp_path / "many.json"
+    f.write_text(json.dumps({"train": many}))
+    r = run("--objects", str(f), "--orders", "all", "--out", str(tmp_path / "o"))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "10!" in lines[0] and "--orders N" in lines[0], r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+# -- --out: not a directory we may write, or owned by another run -----------------------------------------------------
+
+def test_out_that_cannot_be_a_directory_is_refused(tmp_path):
+    (tmp_path / "afile").write_text("mine")
+    (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
+    for out, words in ((tmp_path / "afile", "not a directory"), (tmp_path / "afile" / "sub", "not a directory"),
+                       (tmp_path / "dangling", "symbolic link"), (tmp_path / "dangling" / "sub", "symbolic link")):
+        r = run("--out", str(out))
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and words in lines[0], (out, r.stderr)
+        assert "Traceback" not in r.stderr and r.stdout == ""
+    assert (tmp_path / "afile").read_text() == "mine" and not (tmp_path / "nowhere").exists()
+
+
+@pytest.mark.skipif(not hasattr(os, "geteuid"), reason="POSIX permissions")
+def test_unwritable_out_is_refused(tmp_path):
+    locked = tmp_path / "locked"
+    locked.mkdir(mode=0o555)
+    # root may write anywhere; the runner asks os.access, which answers for the real uid: make that an ordinary
+    # user's (the effective uid stays root, so the interpreter under /root can still start)
+    as_user = {"preexec_fn": lambda: os.setreuid(65534, -1)} if os.geteuid() == 0 else {}
+    for out in (locked, locked / "sub"):
+        r = subprocess.run([sys.executable, str(ROOT / "train" / "run.py"), "--out", str(out)], capture_output=True,
+                           text=True, timeout=60, **as_user)
+        assert r.returncode == 2 and "not writable" in r.stderr and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert list(locked.iterdir()) == []
+
+
+def test_out_in_use_by_another_run_is_refused_and_left_alone(tmp_path):
+    import fcntl
+    out = tmp_path / "busy"
+    out.mkdir()
+    with open(out / ".lock", "w") as lock:     # what a running run holds
+        lock.write("4242\n")
+        lock.flush()
+        fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        for args in ([], ["--resume"]):
+            r = run("--out", str(out), *args)
+            lines = r.stderr.strip().splitlines()
+            assert r.returncode == 2 and len(lines) == 1 and "in use by another run (pid 4242)" in lines[0], r.stderr
+        assert sorted(p.name for p in out.iterdir()) == [".lock"] and (out / ".lock").read_text() == "4242\n"
+
+
+def test_ctrl_c_in_a_terminal_ends_with_one_line_workers_included(tmp_path):
+    # SIGINT to the whole process group, as a terminal's Ctrl-C does: the simulation's worker processes get it too
+    f = tmp_path / "objects.json"
+    f.write_text(json.dumps({"train": [GOOD, obj(name="blue", color="blue")]}))
+    out = tmp_path / "out"
+    cmd = [sys.executable, str(ROOT / "train" / "run.py"), "--objects", str(f), "--orders", "listed", "--out", str(out)]
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    while "simulating" not in (line := p.stdout.readline()):
+        assert line, p.stderr.read()
+    time.sleep(0.5)   # the workers are starting up or simulating
+    os.killpg(p.pid, signal.SIGINT)
+    _, err = p.communicate(timeout=60)
+    lines = err.strip().splitlines()
+    assert p.returncode == 130 and len(lines) == 1 and "interrupted" in lines[0] and "--resume" in lines[0], err
+    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert len(json.loads((out / "summary.json").read_text())["runs"][0]["episodes"]) == 2
+
+
+def test_everything_before_the_first_line_runs_without_torch(tmp_path):
+    # the first line must come within a second: flags, the objects file and --out are checked before torch (about a
+    # second to import) is loaded
+    code = ("import sys; sys.path.insert(0, sys.argv[1]); from train import run; "
+            "a = run.parse_args(['--out', sys.argv[2]]); o = run.load_objects_or_fail(a.objects); "
+            "run.count_orders(len(o.train), a.orders); run.check_out(a.out, a.resume); "
+            "print(sorted(m for m in ('torch', 'tensorboard', 'matplotlib') if m in sys.modules))")
+    r = subprocess.run([sys.executable, "-c", code, str(ROOT), str(tmp_path / "o")], capture_output=True, text=True,
+                       timeout=60)
+    assert r.returncode == 0 and r.stdout.strip() == "[]", (r.stdout, r.stderr)

@@ -70,7 +70,7 @@ def test_online_update_follows_minisom_decay_by_hand():
     for eta, sig in ((0.5, 1.0), (0.25, 0.5)):
         bmu = min(range(3), key=lambda u: abs(w[u] - x))
         w = [w[u] + eta * math.exp(-((u - bmu) ** 2) / (2 * sig * sig)) * (x - w[u]) for u in range(3)]
-    som.train(torch.tensor([[x]]), 2, torch.Generator().manual_seed(0))
+    som.train_online(torch.tensor([[x]]), 2, torch.Generator().manual_seed(0))
     assert som.weights.flatten().tolist() == pytest.approx(w, rel=1e-6)
 
 
@@ -117,7 +117,7 @@ def test_training_orders_the_map_and_lowers_qe(online):
     som.init_weights(data, torch.Generator().manual_seed(1))
     before = som.quantization_error(data)
     if online:
-        som.train(data, 2000, g)
+        som.train_online(data, 2000, g)
     else:
         som.train_batch(data, 20)
     after = som.quantization_error(data)
@@ -147,7 +147,7 @@ def test_same_seed_same_weights():
         som = SelfOrganizingMap(SOMConfig(rows=3, cols=3, dim=3))
         g = torch.Generator().manual_seed(seed)
         som.init_weights(data, g)
-        som.train(data, 200, g)
+        som.train_online(data, 200, g)
         runs.append(som.weights.clone())
     assert torch.equal(runs[0], runs[1])
     assert not torch.equal(runs[0], runs[2])
@@ -174,6 +174,6 @@ def test_bad_input_raises_value_error():
     with pytest.raises(ValueError, match="epochs"):
         som.train_batch(torch.zeros(4, 3), 0)
     with pytest.raises(ValueError, match="num_iteration"):
-        som.train(torch.zeros(4, 3), 0, torch.Generator())
+        som.train_online(torch.zeros(4, 3), 0, torch.Generator())
     with pytest.raises(ValueError, match="rows, cols and dim"):
         SOMConfig(rows=0)

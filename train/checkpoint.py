@@ -1,25 +1,53 @@
-"""Atomic checkpoints: write to a temporary file beside the target, fsync, then rename over it.
+"""Checkpoints that are atomic, checksummed and checked for structure before anything trusts them.
 
-A run killed mid-write leaves the previous checkpoint intact; everything saved is plain tensors, dicts, lists,
-strings and numbers, so `torch.load(path, weights_only=True)` reads it without executing any pickled code.
+Writing: the file is serialized in memory, written to a temporary file beside the target, fsynced, then renamed over
+it, so a run killed (or out of disk space) mid-write leaves the previous checkpoint intact.
+
+Layout (CONTRACTS.md "Checkpoint"): one `torch.save` dict {"format", "version", "sha256", "run", "experiment"}.
+Everything in it is plain tensors, dicts, lists, strings and numbers, so `torch.load(path, weights_only=True)` reads
+it without executing pickled code. "sha256" is the digest of a canonical encoding of "run" and "experiment" (see
+`digest`): a flipped byte that torch.load still decodes changes the content and so the digest. `load` refuses, with
+a one-line `CheckpointError`, a file that is too large, unreadable, foreign, damaged or of the wrong structure.
 """
 
 from __future__ import annotations
 
+import hashlib
+import io
+import math
 import os
+import struct
 import tempfile
 from pathlib import Path
 
-import torch
+FORMAT = "aesop-torch checkpoint"
+VERSION = 1
+# 64 detailed orders of 8 objects is ~6 MB; a file far beyond any real checkpoint is refused before it is read
+MAX_BYTES = 256 * 1024 * 1024
+RUN_KEYS = {"objects": dict, "seed": int, "physics": str, "orders_arg": str}
+EXPERIMENT_KEYS = {"train_names": list, "probe_names": list, "orders": list, "seed": int, "physics": str,
+                   "config": dict, "t": int, "records": list, "outcomes": dict, "probes": dict, "agent": dict}
+OUTCOME_KEYS = {"measurement", "observed_cm3", "archimedes_cm3", "goal_before", "goal_after"}
+MEASUREMENT_LENGTHS = {"rgb": 3, "extent_cm": 3, "fill": None, "mass_g": None}
 
 
-def _write_atomic(path: str | os.PathLike, write, mode: str) -> None:
+class CheckpointError(ValueError):
+    """A checkpoint that must not be used; the message is one line saying why."""
+
+
+# -- writing -----------------------------------------------------------------------------------------------------
+
+def _write_bytes(f, data: bytes) -> None:
+    f.write(data)
+
+
+def _write_atomic(path: str | os.PathLike, data: bytes) -> None:
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
-        with os.fdopen(fd, mode) as f:
-            write(f)
+        with os.fdopen(fd, "wb") as f:
+            _write_bytes(f, data)
             f.flush()
             os.fsync(f.fileno())
         umask = os.umask(0)
@@ -31,13 +59,204 @@ def _write_atomic(path: str | os.PathLike, write, mode: str) -> None:
         raise
 
 
-def save_atomic(obj, path: str | os.PathLike) -> None:
-    _write_atomic(path, lambda f: torch.save(obj, f), "wb")
+def save_atomic(state: dict, path: str | os.PathLike) -> None:
+    """state: {"run": ..., "experiment": ...}; written with its format tag and checksum."""
+    import torch
+
+    buf = io.BytesIO()   # serialized in memory: a full disk shows up as a plain OSError from the write below
+    torch.save({"format": FORMAT, "version": VERSION, "sha256": digest(state), **state}, buf)
+    _write_atomic(path, buf.getvalue())
 
 
 def write_text_atomic(text: str, path: str | os.PathLike) -> None:
-    _write_atomic(path, lambda f: f.write(text), "w")
+    _write_atomic(path, text.encode())
 
+
+# -- the checksum ------------------------------------------------------------------------------------------------
+
+def digest(obj) -> str:
+    """sha256 of a canonical encoding of plain data (dicts by sorted key, lists, tuples, str, int, float, bool,
+    None, bytes, tensors by dtype, shape and bytes): equal content, equal digest, whatever the pickling."""
+    h = hashlib.sha256()
+    _feed(h, obj)
+    return h.hexdigest()
+
+
+def _feed(h, x) -> None:
+    import torch
+
+    if x is None or isinstance(x, bool):
+        h.update(b"N" if x is None else (b"T" if x else b"F"))
+    elif isinstance(x, int):
+        s = str(x).encode()
+        h.update(b"i%d:" % len(s) + s)
+    elif isinstance(x, float):
+        h.update(b"f" + struct.pack("<d", x))
+    elif isinstance(x, str):
+        s = x.encode("utf-8", "surrogatepass")
+        h.update(b"s%d:" % len(s) + s)
+    elif isinstance(x, bytes):
+        h.update(b"b%d:" % len(x) + x)
+    elif isinstance(x, (list, tuple)):
+        h.update(b"%s%d:" % (b"l" if isinstance(x, list) else b"t", len(x)))
+        for v in x:
+            _feed(h, v)
+    elif isinstance(x, dict):
+        h.update(b"d%d:" % len(x))
+        for k in sorted(x, key=lambda k: (type(k).__name__, str(k))):
+            _feed(h, k)
+            _feed(h, x[k])
+    elif isinstance(x, torch.Tensor):
+        t = x.detach().cpu().contiguous()
+        h.update(f"T{t.dtype}{tuple(t.shape)}:".encode())
+        h.update(t.view(torch.uint8).numpy().tobytes() if t.numel() else b"")
+    else:
+        raise TypeError(f"cannot checksum a {type(x).__name__}")
+
+
+# -- reading -----------------------------------------------------------------------------------------------------
 
 def load(path: str | os.PathLike) -> dict:
-    return torch.load(path, map_location="cpu", weights_only=True)
+    """{"run", "experiment"} of a checkpoint written by `save_atomic`, verified (size, format, checksum, structure).
+    CheckpointError (one line) otherwise; nothing is written."""
+    import torch
+
+    path = Path(path)
+    try:
+        size = path.stat().st_size
+    except OSError as e:
+        raise CheckpointError(f"cannot read {path}: {e.strerror}") from None
+    if not path.is_file():
+        raise CheckpointError(f"{path} is not a regular file")
+    if size > MAX_BYTES:
+        raise CheckpointError(f"{path} is {size:,} bytes, larger than any checkpoint ({MAX_BYTES:,})")
+    try:
+        raw = torch.load(path, map_location="cpu", weights_only=True)
+    except Exception as e:  # noqa: BLE001  a damaged or foreign file can fail in many ways; each is one line
+        raise CheckpointError(f"{path} is not a readable checkpoint (damaged or foreign: {type(e).__name__})"
+                              ) from None
+    if isinstance(raw, dict) and set(raw) == {"run", "experiment"}:
+        raise CheckpointError(f"{path} is a checkpoint of an older version, without a checksum: remake it, or "
+                              f"convert it if you trust it (train.checkpoint.upgrade)")
+    if not isinstance(raw, dict) or raw.get("format") != FORMAT:
+        raise CheckpointError(f"{path} is not an aesop-torch checkpoint (no format tag {FORMAT!r})")
+    if raw.get("version") != VERSION:
+        raise CheckpointError(f"{path}: checkpoint version {raw.get('version')!r}, this code reads {VERSION}")
+    extra = set(raw) - {"format", "version", "sha256", "run", "experiment"}
+    if extra or not {"run", "experiment"} <= set(raw):
+        raise CheckpointError(f"{path}: unexpected top-level keys {sorted(map(str, set(raw)))}")
+    state = {"run": raw["run"], "experiment": raw["experiment"]}
+    try:
+        ok = raw.get("sha256") == digest(state)
+    except (TypeError, RecursionError):
+        ok = False
+    if not ok:
+        raise CheckpointError(f"{path}: checksum mismatch, the file is damaged")
+    problem = structure_problem(state)
+    if problem:
+        raise CheckpointError(f"{path}: wrong structure: {problem}")
+    return state
+
+
+def upgrade(path: str | os.PathLike) -> None:
+    """Rewrite in place a checkpoint written before checksums ({"run", "experiment"} only) in today's format, after
+    the structure check. Its content cannot be verified: use it on files you trust (e.g. a shipped default)."""
+    import torch
+
+    raw = torch.load(path, map_location="cpu", weights_only=True)
+    if not isinstance(raw, dict) or set(raw) != {"run", "experiment"}:
+        raise CheckpointError(f"{path} is not a checkpoint of the older version")
+    if problem := structure_problem(raw):
+        raise CheckpointError(f"{path}: wrong structure: {problem}")
+    save_atomic(raw, path)
+
+
+def _typed(d: dict, spec: dict, where: str) -> str | None:
+    if set(d) != set(spec):
+        missing, extra = sorted(set(spec) - set(d)), sorted(map(str, set(d) - set(spec)))
+        return f"{where} keys: missing {missing}, unexpected {extra}"
+    for k, kind in spec.items():
+        if not isinstance(d[k], kind) or (kind is int and isinstance(d[k], bool)):
+            return f"{where}[{k!r}] is a {type(d[k]).__name__}, not a {kind.__name__}"
+    return None
+
+
+def _finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def structure_problem(state: dict) -> str | None:
+    """What is wrong with a checkpoint's content (the first problem found), or None. Checks every key and type,
+    that orders are permutations, records and outcomes fit the episodes done, and that the agents' tensors have
+    exactly the names, shapes and dtypes of agents built from the stored config."""
+    if not isinstance(state.get("run"), dict) or not isinstance(state.get("experiment"), dict):
+        return "'run' and 'experiment' must be dicts"
+    if p := _typed(state["run"], RUN_KEYS, "run"):
+        return p
+    e = state["experiment"]
+    if p := _typed(e, EXPERIMENT_KEYS, "experiment"):
+        return p
+    names, probes = e["train_names"], e["probe_names"]
+    if not names or not all(isinstance(n, str) for n in names + probes) or len(set(names + probes)) != len(
+            names + probes):
+        return "object names must be distinct strings, at least one train object"
+    n = len(names)
+    if not e["orders"] or not all(isinstance(o, list) and sorted(o) == list(range(n)) for o in e["orders"]):
+        return f"every order must be a permutation of the {n} train objects"
+    if e["physics"] not in ("cached", "per-episode") or not 0 <= e["seed"] < 2 ** 63 or not 0 <= e["t"] <= n:
+        return "physics, seed or episode count out of range"
+    if (e["physics"], e["seed"]) != (state["run"]["physics"], state["run"]["seed"]):
+        return "run and experiment disagree on physics or seed"
+    if len(e["records"]) != len(e["orders"]) or any(not isinstance(r, list) or len(r) != e["t"] or
+                                                    not all(isinstance(x, dict) for x in r) for r in e["records"]):
+        return f"records must hold {e['t']} episode(s) for each of the {len(e['orders'])} orders"
+    for name, o in list(e["outcomes"].items()):
+        if name not in names or not isinstance(o, dict) or set(o) != OUTCOME_KEYS or not _measurement_ok(
+                o["measurement"]) or not (_finite(o["observed_cm3"]) and _finite(o["archimedes_cm3"])):
+            return f"outcome of {name!r} is malformed"
+    for name, pr in list(e["probes"].items()):
+        if name not in probes or not isinstance(pr, dict) or set(pr) != {"measurement", "archimedes_cm3"} \
+                or not _measurement_ok(pr["measurement"]) or not _finite(pr["archimedes_cm3"]):
+            return f"probe {name!r} is malformed"
+    if e["physics"] == "cached" and e["t"] > 0:
+        missing = {names[o[i]] for o in e["orders"] for i in range(e["t"])} - set(e["outcomes"])
+        if missing:
+            return f"no outcome for {sorted(missing)[0]!r}, which was already dropped"
+    return _agent_problem(e)
+
+
+def _measurement_ok(m) -> bool:
+    if not isinstance(m, dict) or set(m) != set(MEASUREMENT_LENGTHS):
+        return False
+    for k, length in MEASUREMENT_LENGTHS.items():
+        v = m[k]
+        if length is None and not _finite(v):
+            return False
+        if length is not None and not (isinstance(v, list) and len(v) == length and all(map(_finite, v))):
+            return False
+    return True
+
+
+def _agent_problem(e: dict) -> str | None:
+    import torch
+
+    from aesop_torch.agent import AgentConfig
+    from train.experiment import Experiment
+    try:
+        config = AgentConfig.from_dict(e["config"])
+        like = Experiment(e["train_names"], e["probe_names"], e["orders"], e["seed"], e["physics"], config,
+                          develop=False).agent.state_dict()
+    except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
+        return f"config does not build an agent ({type(err).__name__})"
+    got = e["agent"]
+    if set(got) != set(like):
+        missing, extra = sorted(set(like) - set(got)), sorted(map(str, set(got) - set(like)))
+        return f"agent state: missing {missing[:3]}, unexpected {extra[:3]}"
+    for k, ref in like.items():
+        v = got[k]
+        if not isinstance(v, torch.Tensor) or v.shape != ref.shape or v.dtype != ref.dtype:
+            what = f"{tuple(v.shape)} {v.dtype}" if isinstance(v, torch.Tensor) else type(v).__name__
+            return f"agent state {k!r}: {what}, expected {tuple(ref.shape)} {ref.dtype}"
+        if v.is_floating_point() and not torch.isfinite(v).all():
+            return f"agent state {k!r} holds non-finite values"
+    return None

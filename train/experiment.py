@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 import statistics
-from dataclasses import dataclass, field
+from dataclasses import InitVar, dataclass, field
 
 import torch
 
@@ -111,14 +111,16 @@ class Experiment:
     records: list[list[dict]] = field(default_factory=list)
     outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
     probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
+    # False: the agents' maps are not trained here because a state dict is about to bring them (from_state_dict)
+    develop: InitVar[bool] = True
 
-    def __post_init__(self):
+    def __post_init__(self, develop: bool = True):
         self.config.seed = self.seed
         # an agent encodes at most one episode (and one object) per train object: size the buffers to that, so a
         # population of 40,320 agents fits in memory
         self.config.memory.max_episodes = min(self.config.memory.max_episodes, len(self.train_names))
         self.config.hub.max_assemblies = min(self.config.hub.max_assemblies, len(self.train_names))
-        self.agent = Agent(self.config, batch=len(self.orders))
+        self.agent = Agent(self.config, batch=len(self.orders), develop=develop)
         if not self.records:
             self.records = [[] for _ in self.orders]
 
@@ -190,12 +192,21 @@ class Experiment:
     def from_state_dict(cls, state: dict) -> "Experiment":
         exp = cls(state["train_names"], state["probe_names"], state["orders"], state["seed"], state["physics"],
                   AgentConfig.from_dict(state["config"]), state["t"], state["records"], state["outcomes"],
-                  state["probes"])
-        exp.agent.load_state_dict(state["agent"])
+                  state["probes"], develop=False)
+        exp.agent.load_state_dict(state["agent"])   # brings the maps' codebooks (and refreshes the lateral spread)
         return exp
 
 
 def load_experiment(path) -> Experiment:
-    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt) as a live Experiment, agents included."""
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
+    Experiment, agents included.
+
+    Runs on one torch thread (restored after): building a few agents is hundreds of tiny ops, and on a busy 2-core
+    machine a second thread made each of them wait (measured: 0.8 ms on one thread, 12-150 ms on two)."""
     from train.checkpoint import load
-    return Experiment.from_state_dict(load(path)["experiment"])
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        return Experiment.from_state_dict(load(path)["experiment"])
+    finally:
+        torch.set_num_threads(threads)

@@ -3,30 +3,38 @@
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--physics cached|per-episode] [--frames] [--gui]
 
-Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic),
-figure2.png, frames/ (with --frames) and summary.json (SPEC.md). Bad input: one line on stderr, exit code 2, nothing
-written.
+Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic, checksummed),
+figure2.png, frames/ (with --frames) and summary.json (CONTRACTS.md). DIR belongs to one run at a time (a lock on
+DIR/.lock). Bad input: one line on stderr, exit code 2, nothing written. Ctrl-C: one line, exit code 130; a full disk
+or another write error: one line, exit code 1; either way the last checkpoint is intact and --resume continues.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
+import contextlib
+import os
+import re
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from train.checkpoint import load, save_atomic, write_text_atomic  # noqa: E402
-from train.experiment import Experiment, draw_orders, outcome_record, plain_measurement  # noqa: E402
-from train.progress import Progress  # noqa: E402
-from train.summary import FULL_RUNS, build_summary, knowledge_table  # noqa: E402
-
-DEFAULT_OBJECTS = Path(__file__).resolve().parents[1] / "sim" / "default_objects.json"
+# Only light imports up here: torch takes about a second to import, and the first line must come before it.
+ROOT = Path(__file__).resolve().parents[1]
+DEFAULT_OBJECTS = ROOT / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
+DEFAULT_OUT = "runs/run-<date-time>"
 FULL_TB_ORDERS = 16      # tensorboard run directories beyond this would drown a person; see README
+MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
+MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
+LOCK_NAME = ".lock"
+ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
+SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
 
 class UsageError(Exception):
@@ -38,23 +46,48 @@ class Parser(argparse.ArgumentParser):
         raise UsageError(message)
 
 
+class Formatter(argparse.ArgumentDefaultsHelpFormatter):
+    """Shows defaults, except the None / False of options whose help says what they default to."""
+
+    def _get_help_string(self, action):
+        none = action.default is None or action.default is False
+        return action.help if none else super()._get_help_string(action)
+
+
+def orders_arg(text: str) -> str:
+    if not ORDERS_RE.fullmatch(text) or (text.isdigit() and int(text) > MAX_ORDERS):
+        raise argparse.ArgumentTypeError(f"must be a number from 1 to {MAX_ORDERS:,} (ASCII digits), 'listed' or "
+                                         f"'all', not {_shown(text)}")
+    return text
+
+
+def seed_arg(text: str) -> int:
+    if not SEED_RE.fullmatch(text) or int(text) >= MAX_SEED:
+        raise argparse.ArgumentTypeError(f"must be an integer from 0 to 2**63 - 1 (ASCII digits), not {_shown(text)}")
+    return int(text)
+
+
+def _shown(text: str) -> str:
+    return repr(text if len(text) <= 40 else text[:40] + "...")
+
+
 def parse_args(argv):
-    ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0])
-    ap.add_argument("--objects", type=Path, default=DEFAULT_OBJECTS, help="objects file (JSON, SPEC.md schema)")
-    ap.add_argument("--orders", default=DEFAULT_ORDERS, help="N random orders, 'listed' or 'all' permutations")
-    ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--out", type=Path, default=None, help="output directory (default runs/<date-time>)")
+    ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter)
+    ap.add_argument("--objects", type=Path, default=None, metavar="FILE",
+                    help="objects file: JSON, schema in CONTRACTS.md (default: sim/default_objects.json)")
+    ap.add_argument("--orders", type=orders_arg, default=DEFAULT_ORDERS, metavar="N|listed|all",
+                    help=f"N random orders of the train objects (N <= {MAX_ORDERS:,}), 'listed' (the file's order) "
+                         f"or 'all' (every permutation: at most {MAX_ORDERS:,} orders, i.e. 9 objects)")
+    ap.add_argument("--seed", type=seed_arg, default=0, metavar="S",
+                    help="seed of the random orders, of the maps' developmental training and of the sensor noise: "
+                         "same seed, same run")
+    ap.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"output directory (default: {DEFAULT_OUT})")
     ap.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default="cached",
                     help="simulate each distinct object once (cached) or every episode of every order")
     ap.add_argument("--frames", action="store_true", help="save camera frames of each simulated drop")
     ap.add_argument("--gui", action="store_true", help="pybullet GUI (needs a display)")
     a = ap.parse_args(argv)
-    if a.orders not in ("listed", "all"):
-        if not a.orders.isdigit() or int(a.orders) < 1:
-            raise UsageError(f"--orders must be a positive number, 'listed' or 'all', not {a.orders!r}")
-    if a.seed < 0:
-        raise UsageError(f"--seed must be >= 0, not {a.seed}")
     if a.gui:
         from sim.world import gui_unavailable
         if why := gui_unavailable():
@@ -63,6 +96,8 @@ def parse_args(argv):
         raise UsageError("--resume needs --out DIR (the run to continue)")
     if a.out is None:
         a.out = Path("runs") / time.strftime("run-%Y%m%d-%H%M%S")
+    if a.objects is None:
+        a.objects = DEFAULT_OBJECTS
     return a
 
 
@@ -74,69 +109,254 @@ def load_objects_or_fail(path: Path):
         raise UsageError(f"{path}: {e}") from None
 
 
-def prepare(args):
-    """Validate everything and return (experiment, objects, resumed) before a single byte is written."""
-    objects = load_objects_or_fail(args.objects)
-    ckpt_path = args.out / "checkpoints" / "latest.pt"
-    train_names = [o.name for o in objects.train]
-    probe_names = [o.name for o in objects.probe]
-    if args.resume:
-        if not ckpt_path.is_file():
-            raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
-        try:
-            state = load(ckpt_path)
-        except Exception as e:  # a foreign or damaged file: say so in one line
-            raise UsageError(f"--resume: cannot read {ckpt_path}: {type(e).__name__}") from None
-        wanted = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
-                  "orders_arg": args.orders}
-        for key, value in wanted.items():
-            if state["run"].get(key) != value:
-                raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
-        return Experiment.from_state_dict(state["experiment"]), objects, True
-    if args.out.exists() and any(args.out.iterdir()):
-        raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
-    orders = draw_orders(len(train_names), args.orders, args.seed)
-    if len(orders) > FULL_RUNS and args.physics == "per-episode":
-        raise UsageError(f"--physics per-episode with {len(orders)} orders would simulate "
-                         f"{len(orders) * len(train_names)} drops; more than {FULL_RUNS} orders run as a population "
+def count_orders(n_objects: int, orders: str) -> int:
+    """How many orders the flag asks for, refused beyond MAX_ORDERS (before any is drawn)."""
+    if orders == "listed":
+        return 1
+    if orders == "all":
+        count = 1
+        for k in range(2, n_objects + 1):
+            count *= k
+            if count > MAX_ORDERS:
+                raise UsageError(f"--orders all: {n_objects} train objects have {n_objects}! orders, more than "
+                                 f"{MAX_ORDERS:,} (at most 9 objects); use --orders N to draw N of them")
+        return count
+    return int(orders)
+
+
+def check_out(out: Path, resume: bool) -> None:
+    """Refuse an --out that is not, or cannot become, a directory this run may write (nothing is created here)."""
+    if out.is_symlink() and not out.exists():
+        raise UsageError(f"--out {out} is a symbolic link to nothing ({os.readlink(out)})")
+    if out.exists() and not out.is_dir():
+        raise UsageError(f"--out {out} exists and is not a directory")
+    if resume:
+        if not out.is_dir():
+            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist)")
+    else:
+        p = out
+        while not p.exists():
+            if p.is_symlink():
+                raise UsageError(f"--out {out}: {p} is a symbolic link to nothing")
+            p = p.parent
+        if not p.is_dir():
+            raise UsageError(f"--out {out}: {p} is not a directory")
+        if not os.access(p, os.W_OK | os.X_OK):
+            raise UsageError(f"--out {out}: {p} is not writable")
+        if p == out and any(e.name != LOCK_NAME for e in os.scandir(out)):
+            busy = _lock_holder(out)
+            raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else
+                             f"--out {out} already holds files; use --resume to continue it or another --out")
+    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
+        raise UsageError(f"--out {out} is not writable")
+
+
+def _lock_holder(out: Path) -> str | None:
+    """The pid written in DIR/.lock while a run holds it, else None. Only reads."""
+    import fcntl
+
+    try:
+        fd = os.open(out / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC)
+    except OSError:
+        return None
+    try:
+        fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
+        return None
+    except BlockingIOError:
+        return os.read(fd, 32).decode(errors="replace").strip() or "unknown"
+    finally:
+        os.close(fd)   # closing drops the probe's shared lock, if it got one
+
+
+def lock_out(out: Path) -> int:
+    """Make --out this run's: an exclusive flock on DIR/.lock, held until the process ends (the kernel lets go
+    even on SIGKILL). Refused (UsageError) while another run holds it."""
+    import fcntl
+
+    out.mkdir(parents=True, exist_ok=True)
+    fd = os.open(out / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except BlockingIOError:
+        holder = os.read(fd, 32).decode(errors="replace").strip()
+        os.close(fd)
+        raise UsageError(f"--out {out} is in use by another run" + (f" (pid {holder})" if holder else "")) from None
+    os.ftruncate(fd, 0)
+    os.write(fd, f"{os.getpid()}\n".encode())
+    return fd
+
+
+def prepare(args, objects, n_orders: int):
+    """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
+    checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
+    checked."""
+    from train.experiment import Experiment, draw_orders
+    from train.summary import FULL_RUNS
+
+    if n_orders > FULL_RUNS and args.physics == "per-episode":
+        raise UsageError(f"--physics per-episode with {n_orders} orders would simulate "
+                         f"{n_orders * len(objects.train)} drops; more than {FULL_RUNS} orders run as a population "
                          "on cached physics")
-    # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
-    detailed = orders[:FULL_RUNS]
-    return Experiment(train_names, probe_names, detailed, seed=args.seed, physics=args.physics), objects, False
+    created = [d for d in [args.out, *args.out.parents] if not d.exists()]   # innermost first
+    lock = lock_out(args.out)
+    try:
+        if args.resume:
+            return resume_experiment(args, objects), True, lock
+        if any(e.name != LOCK_NAME for e in os.scandir(args.out)):   # filled since check_out: another run's
+            raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
+        # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
+        orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
+        return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
+                          physics=args.physics), False, lock
+    except BaseException:
+        os.close(lock)
+        if created:   # refused or interrupted after all: leave nothing behind (rmdir: only if still empty)
+            (args.out / LOCK_NAME).unlink(missing_ok=True)
+            for d in created:
+                with contextlib.suppress(OSError):
+                    d.rmdir()
+        raise
+
+
+def resume_experiment(args, objects):
+    from train.checkpoint import CheckpointError, load
+    from train.experiment import Experiment
+
+    ckpt_path = args.out / "checkpoints" / "latest.pt"
+    if not ckpt_path.is_file():
+        raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
+    try:
+        state = load(ckpt_path)
+    except CheckpointError as e:
+        raise UsageError(f"--resume: {e}; nothing was changed") from None
+    wanted = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics, "orders_arg": args.orders}
+    for key, value in wanted.items():
+        if state["run"][key] != value:
+            raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
+    return Experiment.from_state_dict(state["experiment"])
 
 
 def main(argv=None) -> int:
     try:
-        args = parse_args(sys.argv[1:] if argv is None else argv)
-        exp, objects, resumed = prepare(args)
-    except UsageError as e:
-        print(f"train/run.py: error: {e}", file=sys.stderr)
-        return 2
-    return run(args, exp, objects, resumed)
+        try:
+            args = parse_args(sys.argv[1:] if argv is None else argv)
+            objects = load_objects_or_fail(args.objects)
+            n_orders = count_orders(len(objects.train), args.orders)
+            check_out(args.out, args.resume)
+            # the first line: everything checkable without torch is checked; torch's import takes the next second
+            print(f"train/run.py: {'resuming' if args.resume else 'starting'} {n_orders:,} order(s) of "
+                  f"{len(objects.train)} object(s), physics {args.physics}, seed {args.seed} -> {args.out}",
+                  flush=True)
+            exp, resumed, lock = prepare(args, objects, n_orders)
+        except UsageError as e:
+            print(f"train/run.py: error: {e}", file=sys.stderr)
+            return 2
+        except OSError as e:   # creating --out or its lock failed (a full disk, a race with another program)
+            print(f"train/run.py: error: {_os_error(e)}", file=sys.stderr)
+            return 1
+        try:
+            return run(args, exp, objects, resumed)
+        finally:
+            os.close(lock)   # the kernel would at exit; a caller of main() in-process may start another run
+    except KeyboardInterrupt:   # before the run started: nothing of value was written
+        with _sigint_ignored():
+            print(f"{_fresh_line()}train/run.py: interrupted before the run started", file=sys.stderr)
+        return 130
 
 
-def run(args, exp: Experiment, objects, resumed: bool) -> int:
+@contextlib.contextmanager
+def _sigint_ignored():
+    """A second Ctrl-C must not interrupt the clean-up after the first (only the main thread may set handlers)."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        yield
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def _fresh_line() -> str:
+    """A newline on a terminal, where a progress bar (or ^C) may have left the cursor mid-line; nothing in a log."""
+    return "\n" if sys.stdout.isatty() else ""
+
+
+def _os_error(e: OSError) -> str:
+    where = f" {e.filename}" if e.filename else ""
+    return f"cannot write{where}: {e.strerror or e}"
+
+
+def run(args, exp, objects, resumed: bool) -> int:
+    out, t0 = args.out, time.time()
+    ckpt = out / "checkpoints" / "latest.pt"
+    saved = {"t": exp.t if resumed else None}   # episodes in the last checkpoint written (None: none yet)
+
+    def last_checkpoint() -> str:
+        if saved["t"] is None:
+            return "no checkpoint was written yet: run the same command again (with another --out, or remove it)"
+        return (f"the last checkpoint ({ckpt}, {saved['t']} of {exp.n_episodes} episodes) is intact: "
+                f"continue with the same flags and --resume --out {out}")
+
+    try:
+        return _run(args, exp, objects, resumed, out, ckpt, saved, t0)
+    except KeyboardInterrupt:
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: interrupted; {last_checkpoint()}", file=sys.stderr)
+        return 130
+    except OSError as e:   # a full disk (ENOSPC) or another write error: the checkpoint is written atomically
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: error: {_os_error(e)}; {last_checkpoint()}", file=sys.stderr)
+        return 1
+    finally:
+        _close_quietly()
+
+
+_OPEN: dict = {"physics": None, "logs": []}   # what the run has open, closed whatever way it ends
+
+
+def _close_quietly() -> None:
+    physics, logs = _OPEN["physics"], _OPEN["logs"]
+    _OPEN["physics"], _OPEN["logs"] = None, []
+    try:
+        if physics is not None:
+            physics.close()
+    except Exception:  # noqa: BLE001  the run is ending; its one line has been said
+        pass
+    for log in logs:
+        try:
+            log.close()
+        except Exception:  # noqa: BLE001
+            pass
+
+
+def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
+    import json
+
     import torch
 
     from sim.objects import archimedes_cm3
+    from train.checkpoint import save_atomic, write_text_atomic
+    from train.experiment import draw_orders, outcome_record, plain_measurement
     from train.physics import Physics
+    from train.progress import Step
+    from train.summary import build_summary, knowledge_table
     from train.tensorboard_log import OrderLog
     # small tensors (a few agents) run faster on one thread than on two fighting each other; a large population's
     # big tensors use both cores
     torch.set_num_threads(1 if len(exp.orders) <= 256 else 2)
-
-    out, t0 = args.out, time.time()
-    ckpt = out / "checkpoints" / "latest.pt"
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
 
     def checkpoint():
         save_atomic({"run": run_meta, "experiment": exp.state_dict()}, ckpt)
+        saved["t"] = exp.t
 
     if not resumed:
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
-    logs = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
-            for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
+    logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
+                            for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
         hp = {"seed": args.seed, "physics": args.physics, "orders": args.orders,
               "objects": str(args.objects), **_flat("agent", exp.config.to_dict())}
@@ -144,24 +364,27 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
             log.hparams({**hp, "order": " ".join(exp.train_names[i] for i in exp.orders[b])},
                         {"prediction/probe_rel_error": float("nan")})
 
-    physics = Physics(objects, seed=args.seed, gui=args.gui)
+    physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)
     specs = {o.name: o for o in objects.train + objects.probe}
 
     def keep(outcome, tag: str) -> dict:
         if args.frames and outcome.frames:
             from sim.episode import save_frames_png
-            save_frames_png(outcome.frames, out / "frames" / tag)
-            for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
-                logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
+            with Step(f"frames of {tag}", len(outcome.frames), "frame", announce=False) as bar:
+                save_frames_png(outcome.frames, out / "frames" / tag)
+                for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
+                    logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
+                    bar.update()
         return outcome_record(outcome)
 
     # probes are inspected once; with cached physics every distinct train object is dropped once, all up front
     todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
     probes = [n for n in exp.probe_names if n not in exp.probes]
     if todo or probes:
-        print(f"simulating {len(todo)} drop(s) and {len(probes)} probe inspection(s) on {physics.workers} "
-              f"process(es)", flush=True)
-        results = physics.run([("drop", n, args.frames) for n in todo] + [("inspect", n, None) for n in probes])
+        jobs = [("drop", n, args.frames) for n in todo] + [("inspect", n, None) for n in probes]
+        with Step(f"simulating {len(todo)} drop(s) and {len(probes)} probe inspection(s) on {physics.workers} "
+                  f"process(es)", len(jobs), "simulation") as bar:
+            results = physics.run(jobs, progress=lambda job: bar.update(1, job[1]))
         for name, outcome in zip(todo, results):
             exp.outcomes[name] = keep(outcome, name)
         for name, m in zip(probes, results[len(todo):]):
@@ -172,21 +395,29 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
           f"physics {exp.physics}" + (" (each distinct object simulated once, its measured outcome reused by "
                                        "every order: the jar is reset between episodes)" if exp.physics == "cached"
                                        else ""), flush=True)
-    progress = Progress(exp.n_episodes)
-    while not exp.done:
-        t = exp.t
-        if exp.physics == "per-episode":
-            names = [exp.train_names[o[t]] for o in exp.orders]
-            fresh = [keep(o, f"order{b + 1:02d}_ep{t + 1:02d}_{n}")
-                     for b, (n, o) in enumerate(zip(names, physics.drops(names, args.frames)))]
-            recs = exp.step(lambda name, b, t: fresh[b])
-        else:
-            recs = exp.step(lambda name, b, t: exp.outcomes[name])
-        for b, log in enumerate(logs):
-            log.episode(t, recs[b])
-        checkpoint()
-        progress.update(exp.t, recs[0]["object"], recs[0]["rules"])
+    per_episode = exp.physics == "per-episode"
+    units = len(exp.orders) if per_episode else 1     # per-episode physics: the bar counts drops
+    with Step("episodes", (exp.n_episodes - exp.t) * units, "drop" if per_episode else "episode",
+              announce=False) as bar:
+        while not exp.done:
+            t = exp.t
+            if per_episode:
+                names = [exp.train_names[o[t]] for o in exp.orders]
+                drops = physics.drops(names, args.frames, progress=lambda job: bar.update(1, f"episode {t + 1}: "
+                                                                                             f"{job[1]}"))
+                fresh = [keep(o, f"order{b + 1:02d}_ep{t + 1:02d}_{n}") for b, (n, o) in enumerate(zip(names, drops))]
+                recs = exp.step(lambda name, b, t: fresh[b])
+            else:
+                recs = exp.step(lambda name, b, t: exp.outcomes[name])
+            for b, log in enumerate(logs):
+                log.episode(t, recs[b])
+            checkpoint()
+            fired = " ".join(f"{p}:{r}" for p, r in recs[0]["rules"].items())
+            bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
+            if not per_episode:
+                bar.update(1, recs[0]["object"])
     physics.close()
+    _OPEN["physics"] = None
 
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
@@ -194,8 +425,9 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
         from train.population import run_population
         print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in detail)",
               flush=True)
-        population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
-                                    exp.config)
+        with Step("population", len(orders), "order") as bar:
+            population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
+                                        exp.config, progress=bar.to)
     summary = build_summary(exp, population)
     from train.figures import figure2
     fig = figure2(exp.records)
@@ -205,6 +437,7 @@ def run(args, exp: Experiment, objects, resumed: bool) -> int:
     for log in logs:
         log.writer.add_image("figure2", image, exp.n_episodes)
         log.close()
+    _OPEN["logs"] = []
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")

@@ -1,4 +1,4 @@
-"""summary.json (SPEC.md contract) and the short table the runner prints at the end.
+"""summary.json (CONTRACTS.md contract) and the short table the runner prints at the end.
 
 For large populations (more than FULL_RUNS orders) `runs` keeps the full episode records of the first FULL_RUNS
 orders only (the runner runs those in detail), and a compact `population` block covers every order: its final

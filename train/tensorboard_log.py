@@ -1,4 +1,4 @@
-"""Tensorboard for a run: one run directory per presentation order, tags as in SPEC.md.
+"""Tensorboard for a run: one run directory per presentation order, tags as in CONTRACTS.md.
 
 Scalars `certainty/<property>`, `prediction/abs_error_cm3` (|prediction - Archimedes| for the dropped object, once a
 prediction can be made), `prediction/probe_rel_error`, `rules/<property>/<E|G|U|S>` (1 when that rule fired that
