@@ -27,7 +27,8 @@ MAX_BYTES = 256 * 1024 * 1024
 RUN_KEYS = {"objects": dict, "seed": int, "physics": str, "orders_arg": str}
 EXPERIMENT_KEYS = {"train_names": list, "probe_names": list, "orders": list, "seed": int, "physics": str,
                    "config": dict, "t": int, "records": list, "outcomes": dict, "probes": dict, "agent": dict}
-OUTCOME_KEYS = {"measurement", "observed_cm3", "archimedes_cm3", "goal_before", "goal_after"}
+OUTCOME_KEYS = {"measurement", "observed_cm3", "archimedes_cm3", "goal_before", "goal_after", "sank"}
+OUTCOME_OPTIONAL = {"true"}   # the file's values, kept for the logs
 MEASUREMENT_LENGTHS = {"rgb": 3, "extent_cm": 3, "fill": None, "mass_g": None}
 
 
@@ -211,7 +212,8 @@ def structure_problem(state: dict) -> str | None:
                                                     not all(isinstance(x, dict) for x in r) for r in e["records"]):
         return f"records must hold {e['t']} episode(s) for each of the {len(e['orders'])} orders"
     for name, o in list(e["outcomes"].items()):
-        if name not in names or not isinstance(o, dict) or set(o) != OUTCOME_KEYS or not _measurement_ok(
+        keys_ok = isinstance(o, dict) and OUTCOME_KEYS <= set(o) <= OUTCOME_KEYS | OUTCOME_OPTIONAL
+        if name not in names or not keys_ok or not isinstance(o["sank"], bool) or not _measurement_ok(
                 o["measurement"]) or not (_finite(o["observed_cm3"]) and _finite(o["archimedes_cm3"])):
             return f"outcome of {name!r} is malformed"
     for name, pr in list(e["probes"].items()):
