@@ -8,8 +8,9 @@ images (colour, depth buffer, segmentation mask) and what the robot knows of its
 and how high its top is (`Workspace`). The segmentation mask stands in for figure-ground segmentation.
 
 Two views (`CameraConfig`), each one TinyRenderer image (~35 ms each, mostly the iCub's meshes):
-1. a side view from the robot's right (-y), 10 degrees above the horizontal, aimed at the stand: a fixed glance
-   that finds the object (where it is, how wide, how tall) and gives its side profile;
+1. a side view from the robot's right (-y), 10 degrees above the horizontal, aimed at the stand (rolled 15 degrees
+   about its axis, so upright edges cross the pixel grid): a fixed glance that finds the object (where it is, how
+   wide, how tall) and gives its side profile;
 2. a top view straight down, from 30 cm above the object's top, centred and zoomed on what the glance found (so a
    1.5 cm cube is ~100 pixels across and a 9 cm box ~200), as an eye that turns and zooms onto the object.
 The iCub's head sits behind the stand and cannot look from these two places; they stand for a head that moves
@@ -23,9 +24,11 @@ Each pixel under the mask is back-projected to a world point: camera intrinsics 
   depth), which makes the outline unbiased to +-half a pixel. So a box turned about z, or lying on its side, is
   measured along its own sides. Sorted descending.
 - fill (volume / bounding-box volume): the top silhouette's area over its rectangle's area (a disc: pi/4), times
-  the side profile's mean of (width(z) / widest)^2 over the height (a cylinder or box: 1, a sphere: 2/3). This is
-  exact when every horizontal cross-section is the footprint scaled (prisms standing on a face, spheres): cube and
-  box 1, upright cylinder pi/4, sphere pi/6. A cylinder lying on its side breaks that assumption (it would read 1).
+  the side profile's mean of (width(z) / widest)^2 over the height (a cylinder or box: 1, a sphere: 2/3), where
+  widest is the top view's outline as the side camera sees it (between its two grazing rays), capped at 1. This
+  is exact when every horizontal cross-section is the footprint scaled (prisms standing on a face, spheres): cube
+  and box 1, upright cylinder pi/4, sphere pi/6. A cylinder lying on its side breaks that assumption (it would
+  read about 1); no object of the experiment lies on its side (objects stand as their dims describe them).
 - rgb: the mean colour of the top view's pixels under the mask, rendered with flat light (ambient only), so a
   pixel carries its surface's colour, not the light's.
 - mass_g: the weight felt when lifting (sim/episode.py, sim/world.py `weigh`), not from here.
@@ -54,6 +57,9 @@ class CameraConfig:
     side_azimuth_deg: float = -90.0   # from -y, the robot's right: nothing of the robot or the jar in between
     side_elevation_deg: float = 10.0  # low, so the profile sees the lower half of a sphere; above 0 so the stand
                                       # top never hides the object's foot
+    side_roll_deg: float = 15.0       # the camera rolled about its axis: an upright edge then crosses the pixel
+                                      # columns, so the rows' half-pixel errors average out along it instead of
+                                      # all being the same (a 2 cm cube's fill was off by 0.07 without)
     side_field_cm: float = 20.0       # wide enough for a 12.7 cm footprint diagonal and a 12 cm tall object
     side_aim_cm: float = 6.0          # aimed this far above the stand top
     top_distance: float = 0.30        # m above the object's top
@@ -190,11 +196,13 @@ def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
     aim = np.array([ws.stand_xy[0], ws.stand_xy[1], ws.stand_top_z + cam.side_aim_cm / 100.0])
     toward = np.array([math.cos(az) * math.cos(el), math.sin(az) * math.cos(el), math.sin(el)])
     fov = math.degrees(2 * math.atan(cam.side_field_cm / 200.0 / cam.side_distance))
-    view = take_view(client, aim + cam.side_distance * toward, aim, [0, 0, 1], fov, cam.width, cam.width,
+    fwd = -np.array([math.cos(az), math.sin(az), 0.0])         # horizontal, away from the camera
+    right = np.array([fwd[1], -fwd[0], 0.0])                   # horizontal, to the camera's right
+    roll = math.radians(cam.side_roll_deg)
+    up = math.cos(roll) * np.array([0.0, 0.0, 1.0]) + math.sin(roll) * right
+    view = take_view(client, aim + cam.side_distance * toward, aim, up, fov, cam.width, cam.width,
                      cam.near, cam.far)
     mask = _mask(view, body, "side", cam.min_pixels)
-    fwd = -np.array([math.cos(az), math.sin(az), 0.0])         # horizontal, away from the camera
-    right = view.cam_to_world[:3, 0]                           # the image's +x: horizontal (no roll)
     rows, cols = np.nonzero(mask)
     pts = view.back_project(rows, cols)
     a, f = pts @ right, pts @ fwd
@@ -207,7 +215,7 @@ def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
     lpts, rpts = view.back_project(r_idx, first, du=-0.5), view.back_project(r_idx, last, du=+0.5)
     return {"centre_xy": centre[:2], "width": float(max(a.max() - a.min(), f.max() - f.min())),
             "top_z": float(pts[:, 2].max()), "left": (lpts[:, 2], lpts @ right), "right": (rpts[:, 2], rpts @ right),
-            "view": view}
+            "lateral": right[:2], "fwd": fwd[:2], "view": view}
 
 
 def top_view(client: int, body: int, centre_xy, top_z: float, width: float, cam: CameraConfig,
@@ -249,6 +257,22 @@ def support(xy: np.ndarray, n: np.ndarray, px: float) -> float:
     return float(d[d >= d.max() - t].mean()) + t / 2
 
 
+def width_seen_from(xy: np.ndarray, px: float, eye_xy, fwd, right) -> float:
+    """The footprint outline's width across a side camera's view as that camera sees it: the lateral positions
+    where the two rays from its eye that graze the outline touch it. In perspective a box turned a little shows
+    the corner that faces the camera, not the one behind, so its orthographic width would be too wide. Each
+    grazing point is placed to a fraction of a pixel by `support` across its ray."""
+    d = xy - np.asarray(eye_xy)[None, :]
+    ang = np.arctan2(d @ right, d @ fwd)
+    lateral = []
+    for k, sign in ((int(np.argmax(ang)), 1.0), (int(np.argmin(ang)), -1.0)):
+        th = ang[k]
+        n = sign * (-math.sin(th) * np.asarray(fwd) + math.cos(th) * np.asarray(right))  # across the ray, outward
+        q = xy[k] + (support(xy, n, px) - xy[k] @ n) * n
+        lateral.append(float(q @ right))
+    return lateral[0] - lateral[1]
+
+
 def outline(view: View, mask: np.ndarray) -> tuple[np.ndarray, float]:
     """The centres of the mask's boundary pixels (8-neighbourhood) back-projected, xy (N, 2), and the pixel size
     at their depth."""
@@ -288,8 +312,7 @@ def look(client: int, body: int, ws: Workspace, camera: CameraConfig = CameraCon
     centre, sides = outline_rect(xy, px)
     # the silhouette's area on the plane of its outline (a sphere's is its widest circle, not its top)
     top_fill = len(rows) * px * px / (sides[0] * sides[1])
-    lateral = side["view"].cam_to_world[:2, 0]
-    widest = support(xy, lateral, px) + support(xy, -lateral, px)
+    widest = width_seen_from(xy, px, side["view"].cam_to_world[:2, 3], side["fwd"], side["lateral"])
     bins = int(np.clip(round(height / side["view"].pixel_size(camera.side_distance)), 8, 256))
     prof = profile_factor(side["left"], side["right"], ws.stand_top_z, top_z, bins, widest)
     rgb = top.rgb[mask].astype(np.float64).mean(axis=0) / 255.0
