@@ -105,7 +105,6 @@ class Percept:
     measurement: dict
     top_centre: np.ndarray  # (3,) world: the middle of the object's footprint at the height of its top
     height_m: float
-    n_views: int = 2
 
 
 def render(client: int, eye, target, width: int, height: int, fov_deg: float, near: float = 0.02,
@@ -195,14 +194,20 @@ def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
     az, el = math.radians(cam.side_azimuth_deg), math.radians(cam.side_elevation_deg)
     aim = np.array([ws.stand_xy[0], ws.stand_xy[1], ws.stand_top_z + cam.side_aim_cm / 100.0])
     toward = np.array([math.cos(az) * math.cos(el), math.sin(az) * math.cos(el), math.sin(el)])
-    fov = math.degrees(2 * math.atan(cam.side_field_cm / 200.0 / cam.side_distance))
     fwd = -np.array([math.cos(az), math.sin(az), 0.0])         # horizontal, away from the camera
     right = np.array([fwd[1], -fwd[0], 0.0])                   # horizontal, to the camera's right
     roll = math.radians(cam.side_roll_deg)
     up = math.cos(roll) * np.array([0.0, 0.0, 1.0]) + math.sin(roll) * right
-    view = take_view(client, aim + cam.side_distance * toward, aim, up, fov, cam.width, cam.width,
-                     cam.near, cam.far)
-    mask = _mask(view, body, "side", cam.min_pixels)
+    for widen in (1.0, 2.0):   # an object too big for the usual field (taller than ~14 cm): look again, wider
+        fov = math.degrees(2 * math.atan(widen * cam.side_field_cm / 200.0 / cam.side_distance))
+        view = take_view(client, aim + cam.side_distance * toward, aim, up, fov, cam.width, cam.width,
+                         cam.near, cam.far)
+        try:
+            mask = _mask(view, body, "side", cam.min_pixels)
+            break
+        except RuntimeError as e:
+            if widen > 1.0 or "not in the" in str(e):
+                raise
     rows, cols = np.nonzero(mask)
     pts = view.back_project(rows, cols)
     a, f = pts @ right, pts @ fwd

@@ -18,6 +18,7 @@ from sim.world import World
 CASES = {  # name: (shape, dims, rgb, orientation as euler xyz)
     "cylinder": ("cylinder", (6.0, 10.0), (0.85, 0.10, 0.10), (0, 0, 0)),
     "thin_cylinder": ("cylinder", (1.6, 8.5), (0.10, 0.70, 0.20), (0, 0, 0.7)),
+    "tall_cylinder": ("cylinder", (3.0, 18.0), (0.95, 0.95, 0.95), (0, 0, 0)),   # the side view looks again, wider
     "cube": ("cube", (4.0,), (0.50, 0.50, 0.50), (0, 0, 0)),
     "small_cube": ("cube", (1.5,), (0.95, 0.50, 0.05), (0, 0, 0.3)),
     "sphere": ("sphere", (5.0,), (0.10, 0.25, 0.85), (0, 0, 0)),
