@@ -62,8 +62,8 @@ def measure_one(world: World, spec: ObjectSpec, orn) -> dict:
     true = truth(world.client, body)
     mass = _take(world, body, seen)
     m = seen.measurement
-    ext = np.abs(m["extent_cm"] - true["extent_cm"]) / true["extent_cm"]
-    return {"shape": spec.shape, "extent_rel": float(ext.max()), "extent_signed": (m["extent_cm"] - true["extent_cm"]) / true["extent_cm"],
+    ext = (m["extent_cm"] - true["extent_cm"]) / true["extent_cm"]
+    return {"shape": spec.shape, "extent_rel": float(np.abs(ext).max()), "extent_signed": ext,
             "fill_err": float(m["fill"] - true["fill"]), "rgb_err": m["rgb"] - true["rgb"],
             "mass_err": float(mass - true["mass_g"]), "look_s": look_s}
 

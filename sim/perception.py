@@ -187,7 +187,7 @@ def _mask(view: View, body: int, what: str, min_pixels: int) -> np.ndarray:
     return mask
 
 
-# -- the two views ------------------------------------------------------------------------------------------------------
+# -- the two views ---------------------------------------------------------------------------------------------------
 
 def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
     """The glance from the side: where the object is, how wide and tall, and its width at each height."""
