@@ -38,6 +38,8 @@ class EpisodeOutcome:
     settled: bool                 # False if the settle timeout ran out
     wall_s: float
     frames: list = field(default_factory=list)  # (H, W, 3) uint8 images if recording was asked
+    # the file's values beside what was perceived (extent_cm, fill, mass_g), for the logs; never shown to the agent
+    true: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -119,17 +121,16 @@ def _recorder(record):
     raise ValueError(f"record must be None, True/False or a FrameRecorder, not {type(record).__name__}")
 
 
-def _take(world, body: int) -> float:
-    """Reach above the object, put the palm on its top, hold it, lift it, weigh it: grams felt."""
+def _take(world, body: int, seen) -> float:
+    """Reach above the object where the eye saw its top (`seen`: a sim.perception.Percept), put the palm on it,
+    hold it, lift it, weigh it: grams felt."""
     c = world.config
-    lo, hi = p.getAABB(body, -1, physicsClientId=world.client)
-    top = np.array([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2, hi[2]])
+    top = np.asarray(seen.top_centre, dtype=float)
     touch = top + [0, 0, (c.palm_face_cm + c.grasp_gap_cm) * CM]
     world.move_palm(touch + [0, 0, c.hover_cm * CM])
     world.move_palm(touch, waypoints=3)
     world.grasp(body)
-    height = hi[2] - lo[2]
-    carry_z = world.tank.rim_z + c.carry_clearance_cm * CM + height + (c.palm_face_cm + c.grasp_gap_cm) * CM
+    carry_z = world.tank.rim_z + c.carry_clearance_cm * CM + seen.height_m + (c.palm_face_cm + c.grasp_gap_cm) * CM
     world.move_palm([touch[0], touch[1], max(carry_z, touch[2] + c.hover_cm * CM)], waypoints=3)
     return world.weigh()
 
@@ -146,8 +147,8 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
         world.settle()                                  # the ball and the object at rest before anything is read
         level_before = world.level_reading_cm()
         reachable_before = world.goal_reachable()
-        seen = world.perceive(body, mass_g=0.0)         # colour, size, shape: before touching it
-        mass = _take(world, body)
+        seen = world.look(body)                         # colour, size, shape, where: before touching it
+        mass = _take(world, body, seen)
         palm = world.robot.hand_pose()[0].numpy()
         drop = world.drop_xy()
         world.move_palm([drop[0], drop[1], palm[2]])
@@ -162,11 +163,16 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
         world.recorder = None
     area = world.objects.jar.area_cm2
     return EpisodeOutcome(
-        name=name, measurement={**seen, "mass_g": mass}, observed_cm3=(level_after - level_before) * area,
+        name=name, measurement={**seen.measurement, "mass_g": mass}, observed_cm3=(level_after - level_before) * area,
         level_before_cm=level_before, level_after_cm=level_after,
         archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
         goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
-        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [])
+        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=true_values(spec))
+
+
+def true_values(spec) -> dict:
+    """The object's true size, shape cue and mass (from the objects file), to log beside what was perceived."""
+    return {"extent_cm": [float(x) for x in spec.extent_cm], "fill": float(spec.fill), "mass_g": float(spec.mass_g)}
 
 
 def _rests_on_bottom(world, body: int) -> bool:
@@ -182,13 +188,12 @@ def inspect_object(world, name: str) -> dict:
     world.reset(name)
     body = world.place_on_stand(name)
     world.settle()
-    seen = world.perceive(body, mass_g=0.0)
-    lo, hi = p.getAABB(body, -1, physicsClientId=world.client)
-    mass = _take(world, body)
+    seen = world.look(body)
+    mass = _take(world, body, seen)
     c = world.config
     above_stand = 0.3 * CM  # let go with the object 3 mm above where it stood
-    world.move_palm([(lo[0] + hi[0]) / 2, (lo[1] + hi[1]) / 2,
-                     hi[2] + (c.palm_face_cm + c.grasp_gap_cm) * CM + above_stand], waypoints=3)
+    x, y, top = seen.top_centre
+    world.move_palm([x, y, top + (c.palm_face_cm + c.grasp_gap_cm) * CM + above_stand], waypoints=3)
     world.release()
     world.move_palm(world.robot.hand_pose()[0].numpy() + [0, 0, c.hover_cm * CM], waypoints=2)
-    return {**seen, "mass_g": mass}
+    return {**seen.measurement, "mass_g": mass}

@@ -276,18 +276,62 @@ def _draft_sphere_m(radius: float, volume: float) -> float:
     return 0.5 * (lo + hi)
 
 
+def round_visual(client: int, shape: str, radius: float, length: float, rgb, segments: int = 64) -> int:
+    """A finely tessellated visual mesh for a cylinder (axis z) or a sphere, as the camera should see it.
+
+    pybullet's own GEOM_SPHERE visual is a coarse polygon (a 5 cm sphere looks 4.75 cm across its flats) and its
+    GEOM_CYLINDER visual is ~1 mm larger than the collision cylinder, so the camera measured the renderer's
+    meshes, not the objects. With 64 segments the outline is within 0.12 % of the circle."""
+    n, verts, normals, idx = segments, [], [], []
+    if shape == "sphere":
+        rings = n // 2
+        for i in range(rings + 1):
+            th = math.pi * i / rings
+            for j in range(n):
+                ph = 2 * math.pi * j / n
+                u = [math.sin(th) * math.cos(ph), math.sin(th) * math.sin(ph), math.cos(th)]
+                normals.append(u)
+                verts.append([radius * c for c in u])
+        for i in range(rings):
+            for j in range(n):
+                a, b = i * n + j, i * n + (j + 1) % n
+                idx += [a, a + n, b, b, a + n, b + n]
+    else:
+        h = length / 2
+        for j in range(n):  # the wall: two rings with radial normals
+            ph = 2 * math.pi * j / n
+            c, s = math.cos(ph), math.sin(ph)
+            verts += [[radius * c, radius * s, -h], [radius * c, radius * s, h]]
+            normals += [[c, s, 0.0], [c, s, 0.0]]
+        for j in range(n):
+            a, b = 2 * j, 2 * ((j + 1) % n)
+            idx += [a, b, a + 1, b, b + 1, a + 1]
+        for z, sign in ((-h, -1.0), (h, 1.0)):  # the caps: a fan around their centre
+            centre = len(verts)
+            verts.append([0.0, 0.0, z])
+            normals.append([0.0, 0.0, sign])
+            for j in range(n):
+                ph = 2 * math.pi * j / n
+                verts.append([radius * math.cos(ph), radius * math.sin(ph), z])
+                normals.append([0.0, 0.0, sign])
+            for j in range(n):
+                a, b = centre + 1 + j, centre + 1 + (j + 1) % n
+                idx += [centre, a, b] if sign > 0 else [centre, b, a]
+    return p.createVisualShape(p.GEOM_MESH, vertices=verts, indices=idx, normals=normals, rgbaColor=[*rgb, 1],
+                               physicsClientId=client)
+
+
 def make_body(client: int, shape: str, size_xyz_m, mass_kg: float, rgb, pos, friction: float) -> int:
     """A uniform-density primitive with its exact inertia (z along a cylinder's axis)."""
     sx, sy, sz = (float(v) for v in size_xyz_m)
     if shape == "cylinder":
         col = p.createCollisionShape(p.GEOM_CYLINDER, radius=sx / 2, height=sz, physicsClientId=client)
-        vis = p.createVisualShape(p.GEOM_CYLINDER, radius=sx / 2, length=sz, rgbaColor=[*rgb, 1],
-                                  physicsClientId=client)
+        vis = round_visual(client, "cylinder", sx / 2, sz, rgb)
         r2 = (sx / 2) ** 2
         inertia = [mass_kg * (3 * r2 + sz * sz) / 12] * 2 + [mass_kg * r2 / 2]
     elif shape == "sphere":
         col = p.createCollisionShape(p.GEOM_SPHERE, radius=sx / 2, physicsClientId=client)
-        vis = p.createVisualShape(p.GEOM_SPHERE, radius=sx / 2, rgbaColor=[*rgb, 1], physicsClientId=client)
+        vis = round_visual(client, "sphere", sx / 2, sx, rgb)
         inertia = [0.4 * mass_kg * (sx / 2) ** 2] * 3
     else:  # cube, box
         half = [sx / 2, sy / 2, sz / 2]

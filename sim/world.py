@@ -33,7 +33,7 @@ import torch
 
 from sim.kinematics import ArmKinematics, IKConfig, world_to_root
 from sim.objects import ObjectSet, ObjectSpec, ObjectsConfig
-from sim.perception import CameraConfig, measure
+from sim.perception import CameraConfig, Percept, Workspace, look
 from sim.robot import FACING_PLUS_X, RobotConfig, load_icub, quiet_c_output
 from sim.water import CM, G, Tank, TankConfig
 
@@ -207,15 +207,33 @@ class World:
         if name is not None:
             self.rng = np.random.default_rng([self.seed, zlib.crc32(name.encode())])
 
-    def place_on_stand(self, name: str) -> int:
-        """Create the named object standing upright and unrotated on the stand; returns its body id."""
-        spec = self.spec(name)
+    def place_on_stand(self, name: str, orientation=(0.0, 0.0, 0.0, 1.0)) -> int:
+        """Create the named object on the stand, resting on it, in `orientation` (xyzw; default upright and
+        unrotated: as its dims describe it); returns its body id."""
+        return self.place_object(self.spec(name), orientation)
+
+    def place_object(self, spec: ObjectSpec, orientation=(0.0, 0.0, 0.0, 1.0)) -> int:
+        """`place_on_stand` for any ObjectSpec (benches and tests put generated objects on the stand this way):
+        its lowest point on the stand's top, centred on the stand's axis."""
         if self.body is not None:
             raise RuntimeError("an object is already out; reset() first")
         self._fresh = False
-        pos = [self.config.stand_xy[0], self.config.stand_xy[1], self.stand_top + spec.height_cm * CM / 2]
-        self.body = self.tank.add_object(spec, pos)
+        rot = np.asarray(p.getMatrixFromQuaternion(list(orientation)), dtype=float).reshape(3, 3)
+        half_z = 0.5 * spec.size_xyz_cm * CM @ np.abs(rot[2])   # the rotated box's half height
+        if spec.shape == "sphere":
+            half_z = spec.size_xyz_cm[0] * CM / 2
+        pos = [self.config.stand_xy[0], self.config.stand_xy[1], self.stand_top + half_z]
+        self.body = self.tank.add_object(spec, pos, orientation)
         return self.body
+
+    def remove_object(self):
+        """Take the object out of the scene (benches measure many objects in one world)."""
+        if self.held is not None:
+            self.release()
+        if self.body is not None:
+            self.tank.water.remove_body(self.body)
+            p.removeBody(self.body, physicsClientId=self.client)
+            self.body = None
 
     # -- stepping ----------------------------------------------------------------------------------------------
     def _after_step(self, _i=None):
@@ -342,8 +360,18 @@ class World:
             level += float(self.rng.normal(0.0, c.level_noise_cm))
         return round(level / c.level_resolution_cm) * c.level_resolution_cm
 
+    @property
+    def workspace(self) -> Workspace:
+        """What the robot knows of its stand (where it is, how high its top is): not of the object on it."""
+        return Workspace(tuple(self.config.stand_xy), float(self.stand_top))
+
+    def look(self, body: int) -> Percept:
+        """Look at the object on the stand (two camera images, sim/perception.py): its measurement without the
+        mass, and where its top is, which is where the hand goes to take it."""
+        return look(self.client, body, self.workspace, self.config.camera)
+
     def perceive(self, body: int, mass_g: float) -> dict:
-        return measure(self.client, body, mass_g, self.config.camera)
+        return {**self.look(body).measurement, "mass_g": float(mass_g)}
 
     # -- episodes (sim/episode.py) -----------------------------------------------------------------------------
     def run_episode(self, name: str, record=None):

@@ -67,12 +67,15 @@ def test_summary_contract(paper_run):
     out, summary, stdout = paper_run
     assert set(summary) >= {"seed", "runs", "order_independent"} and summary["seed"] == 0
     ep_keys = {"object", "predicted_cm3", "observed_cm3", "archimedes_cm3", "rules", "knowledge", "encoded",
-               "goal_reached", "probe_rel_error"}
+               "goal_reached", "probe_rel_error", "perceived", "true"}
     for e in summary["runs"][0]["episodes"]:
         assert set(e) == ep_keys
         for k in e["knowledge"].values():
             assert k["state"] in ("unknown", "dominant", "irrelevant", "likely_irrelevant")
             assert 0.0 <= k["certainty"] <= 1.0
+        seen, true = e["perceived"], e["true"]   # what the camera and the hand perceived, beside the file's values
+        assert all(abs(a - b) <= 0.05 * b for a, b in zip(seen["extent_cm"], true["extent_cm"]))
+        assert abs(seen["fill"] - true["fill"]) <= 0.08 and abs(seen["mass_g"] - true["mass_g"]) <= 5.0
     # probes (a heavy and a 20 g cylinder): after episode 1 both are expected to sink like it, so the light one is
     # off by ~17x (median of two = their mean, ~8.6); after episode 3 it is expected to float like the 14 g one
     errs = [e["probe_rel_error"] for e in summary["runs"][0]["episodes"]]
@@ -93,6 +96,8 @@ def test_tensorboard_tags_and_values(paper_run):
             assert f"rules/{p}/{r}" in tags
     assert {"prediction/abs_error_cm3", "prediction/probe_rel_error"} <= tags
     assert any(t.startswith("episodes") for t in tags)
+    text = acc.Tensors(next(t for t in tags if t.startswith("episodes")))[0].tensor_proto.string_val[0].decode()
+    assert "perceived: rgb=" in text and "fill=0.7" in text     # perceived vs true: the cylinder's fill is pi/4
     assert [e.step for e in acc.Images("figure2")] == [3]   # Figure 2, once, at the last episode
 
     def series(tag):

@@ -1,6 +1,6 @@
 """The world with the robot (headless): the goal is unreachable at first, reachable after the paper's heavy
 cylinder and not after the 14 g float; perception recovers a known object; a full episode grasps, drops and
-measures within 2 % of Archimedes; frames can be recorded and saved."""
+measures within 2 % of Archimedes, grasping where the camera saw the object's top; frames can be recorded and saved."""
 
 import numpy as np
 import pybullet as p
@@ -82,13 +82,13 @@ def test_inspect_recovers_a_known_object(world):
     m = world.inspect("grey_heavy_cube")  # a 5 cm grey cube of 300 g: colour, size, shape cue and felt weight
     assert set(m) == {"rgb", "extent_cm", "fill", "mass_g"}
     assert np.all(np.abs(np.asarray(m["rgb"]) - 0.5) < 0.1)
-    assert np.all(np.abs(np.asarray(m["extent_cm"]) - 5.0) < 0.2)
-    assert m["fill"] == pytest.approx(1.0)
+    assert np.all(np.abs(np.asarray(m["extent_cm"]) - 5.0) < 0.2)   # from the camera: 5 % is 0.25 cm
+    assert m["fill"] == pytest.approx(1.0, abs=0.08)
     assert m["mass_g"] == pytest.approx(300.0, abs=4 * NOISE_G + 0.5)
     m = world.inspect("pink_light_cylinder")  # 5 x 8 cm, pink (0.95, 0.55, 0.70)
     assert np.all(np.abs(np.asarray(m["rgb"]) - [0.95, 0.55, 0.70]) < 0.1)
     assert np.all(np.abs(np.asarray(m["extent_cm"]) - [8.0, 5.0, 5.0]) < 0.2)
-    assert m["fill"] == pytest.approx(np.pi / 4)
+    assert m["fill"] == pytest.approx(np.pi / 4, abs=0.08)
     # put back on the stand, upright: probes are never dropped
     pos, orn = p.getBasePositionAndOrientation(world.body, physicsClientId=world.client)
     assert np.allclose(pos[:2], world.config.stand_xy, atol=0.01)

@@ -40,6 +40,7 @@ def outcome_record(outcome) -> dict:
         "goal_before": bool(outcome.goal_reachable_before),
         "goal_after": bool(outcome.goal_reached_after),
         "sank": bool(outcome.sank),
+        "true": dict(outcome.true),   # the file's extent, fill and mass, for the logs: never given to the agent
     }
 
 
@@ -57,6 +58,9 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         return {"rgb": [float(x) for x in s.rgb], "extent_cm": [float(x) for x in s.extent_cm],
                 "fill": float(s.fill), "mass_g": float(s.mass_g)}
 
+    def true(s):  # for the logs, never given to the agent
+        return {k: v for k, v in exact(s).items() if k != "rgb"}
+
     def sensed(s):
         if sensor is None:
             return exact(s), float(archimedes_cm3(s, objects.jar))
@@ -68,7 +72,8 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         m, v = sensed(s)
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
-                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks)}
+                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks),
+                            "true": true(s)}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
     return outcomes, probes
@@ -92,6 +97,13 @@ def median_rel_error(predicted: torch.Tensor, truth: torch.Tensor) -> float | No
         return None
     err = torch.nan_to_num((predicted - truth).abs() / truth, nan=1.0)
     return float(statistics.median(err.tolist()))
+
+
+def _rounded(m: dict) -> dict:
+    """A plain measurement to 3 decimals (rgb, fill) and 0.01 (cm, g): what a reader compares."""
+    r = lambda v, d: [round(x, d) for x in v] if isinstance(v, list) else round(v, d)
+    return {"rgb": r(m["rgb"], 3), "extent_cm": r(m["extent_cm"], 2), "fill": r(m["fill"], 3),
+            "mass_g": r(m["mass_g"], 2)}
 
 
 def _num(x: float) -> float | None:
@@ -156,7 +168,10 @@ class Experiment:
                 "encoded": bool(res.encoded[b]),
                 "goal_reached": out["goal_after"],
                 "probe_rel_error": None if probe_err[b] is None else round(probe_err[b], 4),
+                "perceived": _rounded(plain_measurement(out["measurement"])),
             }
+            if "true" in out:
+                rec["true"] = out["true"]
             self.records[b].append(rec)
             new.append(rec)
         self.t += 1

@@ -18,8 +18,16 @@ from aesop_torch.rules import PROPERTIES, RULE_NAMES
 def episode_line(t: int, rec: dict) -> str:
     exp = "-" if rec["predicted_cm3"] is None else f"{rec['predicted_cm3']:.1f}"
     rules = " ".join(f"{p}:{rec['rules'][p]}" for p in PROPERTIES)
-    return (f"episode {t + 1}: {rec['object']} expected={exp} observed={rec['observed_cm3']:.1f} "
+    line = (f"episode {t + 1}: {rec['object']} expected={exp} observed={rec['observed_cm3']:.1f} "
             f"archimedes={rec['archimedes_cm3']:.1f} rules[{rules}] encoded={rec['encoded']}")
+    seen, true = rec.get("perceived"), rec.get("true") or {}
+    if seen:  # perceived, the true value in brackets (records from before perception was logged have neither)
+        def pair(key, fmt):
+            show = (lambda v: "x".join(fmt.format(x) for x in v)) if isinstance(seen[key], list) else fmt.format
+            return f" {key}={show(seen[key])}" + (f" ({show(true[key])})" if key in true else "")
+        line += (" perceived: rgb=" + "/".join(f"{x:.2f}" for x in seen["rgb"]) + pair("extent_cm", "{:.2f}")
+                 + pair("fill", "{:.3f}") + pair("mass_g", "{:.1f}"))
+    return line
 
 
 class OrderLog:

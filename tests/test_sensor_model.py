@@ -1,0 +1,89 @@
+"""The no-physics paths' noise model (sim/sensor_model.py) tied to the simulator: what the simulated camera, hand
+and jar measure on a few objects lies within 3 sd of the model (about its per-shape bias), and the model draws
+what it says, reproducibly per (seed, object)."""
+
+import math
+
+import numpy as np
+import pybullet as p
+import pytest
+
+from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects
+from sim.oracle import truth
+from sim.sensor_model import SensorModel
+from sim.world import World
+from train.experiment import closed_form_outcomes
+
+MODEL = SensorModel()
+OBJECTS = [  # (spec, orientation as euler xyz): each shape, a turned box and one on its side, small and large
+    (ObjectSpec("cyl", "cylinder", (4.3, 7.9), 200.0, (0.2, 0.6, 0.3)), (0, 0, 0)),
+    (ObjectSpec("cube", "cube", (2.2,), 50.0, (0.9, 0.4, 0.1)), (0, 0, 0.5)),
+    (ObjectSpec("ball", "sphere", (6.8,), 90.0, (0.3, 0.3, 0.8)), (0, 0, 0)),
+    (ObjectSpec("small_ball", "sphere", (2.0,), 9.0, (0.7, 0.2, 0.6)), (0, 0, 0)),
+    (ObjectSpec("box", "box", (8.4, 2.6, 5.1), 300.0, (0.6, 0.6, 0.1)), (0, 0, 1.1)),
+    (ObjectSpec("lying", "box", (3.3, 7.0, 1.9), 120.0, (0.1, 0.1, 0.1)), (math.pi / 2, 0, 0.2)),
+]
+
+
+@pytest.fixture(scope="module")
+def world():
+    w = World(load_objects(DEFAULT_OBJECTS_FILE), seed=0)
+    yield w
+    w.close()
+
+
+@pytest.mark.parametrize("k", range(len(OBJECTS)), ids=[o[0].name for o in OBJECTS])
+def test_the_cameras_errors_are_within_3_sd_of_the_model(world, k):
+    spec, euler = OBJECTS[k]
+    world.reset(spec.name)
+    body = world.place_object(spec, p.getQuaternionFromEuler(euler))
+    world.step(48)
+    m, true = world.look(body).measurement, truth(world.client, body)
+    rel = m["extent_cm"] / true["extent_cm"] - 1.0
+    bias = dict(MODEL.extent_rel_bias)[spec.shape]
+    assert np.all(np.abs(rel - bias) <= 3 * MODEL.extent_rel_sd), rel
+    assert abs(m["fill"] - true["fill"] - dict(MODEL.fill_bias)[spec.shape]) <= 3 * MODEL.fill_sd
+    assert np.all(np.abs(m["rgb"] - true["rgb"]) <= 3 * MODEL.rgb_sd)
+
+
+def test_the_hands_and_the_jars_errors_are_within_3_sd_of_the_model(world):
+    out = world.run_episode("yellow_light_sphere")    # 60 g, a floater: it displaces its mass
+    spec = world.spec("yellow_light_sphere")
+    assert abs(out.measurement["mass_g"] - spec.mass_g) <= 3 * MODEL.mass_sd_g
+    sd = math.hypot(MODEL.outcome_rel_sd * out.archimedes_cm3, MODEL.outcome_abs_sd_cm3)
+    assert abs(out.observed_cm3 - out.archimedes_cm3) <= 3 * sd
+    m = world.inspect("grey_heavy_cube")
+    assert abs(m["mass_g"] - world.spec("grey_heavy_cube").mass_g) <= 3 * MODEL.mass_sd_g
+
+
+def test_the_model_draws_what_it_says():
+    model = SensorModel(rgb_sd=0.01, extent_rel_sd=0.02, fill_sd=0.03, mass_sd_g=2.0, outcome_rel_sd=0.01,
+                        outcome_abs_sd_cm3=0.5)
+    spec = ObjectSpec("s", "sphere", (5.0,), 30.0, (0.5, 0.4, 0.3))   # a floater: 30 cm^3 whatever its size
+    jar = load_objects(DEFAULT_OBJECTS_FILE).jar
+    rng = np.random.default_rng(1)
+    ms = [model.measure(spec, rng) for _ in range(4000)]
+    ext = np.array([m["extent_cm"] for m in ms]) / 5.0 - 1.0
+    fill = np.array([m["fill"] for m in ms]) - spec.fill
+    assert ext.mean() == pytest.approx(dict(model.extent_rel_bias)["sphere"], abs=0.002)
+    assert ext.std() == pytest.approx(0.02, rel=0.15)   # sorting three draws narrows each a little
+    assert fill.mean() == pytest.approx(dict(model.fill_bias)["sphere"], abs=0.002)
+    assert fill.std() == pytest.approx(0.03, rel=0.05)
+    np.testing.assert_allclose(np.std([m["rgb"] for m in ms], axis=0), 0.01, rtol=0.05)
+    assert np.std([m["mass_g"] for m in ms]) == pytest.approx(2.0, rel=0.05)
+    vs = np.array([model.observe(spec, jar, rng) for _ in range(4000)])
+    assert vs.mean() == pytest.approx(30.0, abs=0.05)
+    assert vs.std() == pytest.approx(math.hypot(0.3, 0.5), rel=0.05)
+
+
+def test_same_seed_same_draws():
+    objects = load_objects(DEFAULT_OBJECTS_FILE)
+    a = closed_form_outcomes(objects, sensor=SensorModel(), seed=3)
+    b = closed_form_outcomes(objects, sensor=SensorModel(), seed=3)
+    c = closed_form_outcomes(objects, sensor=SensorModel(), seed=4)
+    assert a == b and a != c
+    name = objects.train[0].name
+    assert a[0][name]["measurement"] != c[0][name]["measurement"]
+    # an object's draws depend on (seed, name) only, not on what else is drawn
+    one = MODEL.measure(objects.train[0], MODEL.rng(3, name))
+    assert one == a[0][name]["measurement"]
