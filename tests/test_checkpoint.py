@@ -44,7 +44,7 @@ class FakePhysics:
                 results.append(types.SimpleNamespace(
                     measurement=o["measurement"], observed_cm3=o["observed_cm3"],
                     archimedes_cm3=o["archimedes_cm3"], goal_reachable_before=o["goal_before"],
-                    goal_reached_after=o["goal_after"], frames=None))
+                    goal_reached_after=o["goal_after"], sank=o["sank"], true=o["true"], frames=None))
             if progress:
                 progress((kind, name, None))
         return results

@@ -66,10 +66,9 @@ def test_to_cpu_and_state_dict_round_trip(model):
     fresh.load_state_dict(state)
     for k, v in fresh.state_dict().items():
         assert torch.equal(v, state[k]), k
-    # the agent's non-persistent lateral spread follows the loaded codebooks: predictions agree exactly
+    # everything the agent computes follows from the loaded state: predictions agree exactly
     m = lifted((0.1, 0.25, 0.85), 420, B=2)
-    assert torch.equal(fresh.agent.predict(m), model.agent.predict(m))
-    assert torch.equal(fresh.agent.lateral, model.agent.lateral)
+    assert torch.equal(fresh.agent.predict(m).nan_to_num(-1.0), model.agent.predict(m).nan_to_num(-1.0))
 
 
 def test_every_module_can_be_called_in_eval_mode(model):

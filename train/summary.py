@@ -4,7 +4,7 @@ For large populations (more than FULL_RUNS orders) `runs` keeps the full episode
 orders only (the runner runs those in detail), and a compact `population` block covers every order: its final
 knowledge (one letter per property: U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error,
 and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed
-over every order.
+over every order (null for a single order, where it is undefined).
 """
 
 from __future__ import annotations
@@ -30,7 +30,9 @@ def build_summary(exp, population: dict | None = None) -> dict:
     runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b]}
             for b in range(len(exp.orders))]
     keys = population["final_knowledge"] if population else [knowledge_key(k) for k in finals]
-    summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": len(set(keys)) == 1}
+    # one order cannot show independence of the order: undefined there (null), never a vacuous true
+    independent = len(set(keys)) == 1 if len(keys) > 1 else None
+    summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": independent}
     if population:
         summary["population"] = {
             "orders": len(keys),
@@ -59,5 +61,6 @@ def knowledge_table(summary: dict) -> str:
     if pop:
         lines.append(f"population: {pop['orders']} orders, {100 * pop['agree_fraction']:.2f}% agree on "
                      f"{pop['most_common_knowledge']} ({pop['key']})")
-    lines.append(f"order_independent: {str(summary['order_independent']).lower()}")
+    independent = summary["order_independent"]
+    lines.append("order_independent: " + ("undefined (one order)" if independent is None else str(independent).lower()))
     return "\n".join(lines)
