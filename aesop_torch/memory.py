@@ -157,7 +157,11 @@ class EpisodicMemory(nn.Module):
     def store(self, episode: torch.Tensor, mask: torch.Tensor | None = None) -> None:
         """One-shot encoding of episode (B, rows, cols) bool for the agents where mask (B,) is True (default all).
 
-        Raises RuntimeError, storing nothing, when a masked agent's memory is full: nothing is ever overwritten."""
+        Each row r of an episode holds either nothing or exactly `config.row_k[r]` active neurons (the row's
+        inhibitory pool lets no more fire in recall): by default 5 on the object row (a hub assembly) and 2 on every
+        other row (a 2-hot event code); the object row must not be empty, since it is what cues the episode.
+        ValueError otherwise. Raises RuntimeError, storing nothing, when a masked agent's memory is full: nothing is
+        ever overwritten."""
         c, B = self.config, self.batch
         if tuple(episode.shape) != (B, c.rows, c.cols):
             raise ValueError(f"episode shape {tuple(episode.shape)}, expected ({B}, {c.rows}, {c.cols})")
