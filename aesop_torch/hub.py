@@ -50,6 +50,13 @@ class HubConfig:
     store_floor: float = 0.05
 
 
+def _relative(acts: torch.Tensor) -> torch.Tensor:
+    """(..., U) activity relative to its peak; a silent map stays 0. Exact for any positive peak, however small (an
+    input far outside a map's range still has its nearest unit as the winner)."""
+    peak = acts.amax(-1, keepdim=True)
+    return torch.where(peak > 0, acts / torch.where(peak > 0, peak, torch.ones_like(peak)), torch.zeros_like(acts))
+
+
 class ObjectHub(nn.Module):
     """The object hub of B agents over P maps (properties and the word map), U_max = the largest map's units.
 
@@ -110,7 +117,7 @@ class ObjectHub(nn.Module):
         """
         acts, present = self._check(acts, present)
         if self.config.relative_activity:
-            acts = acts / acts.amax(-1, keepdim=True).clamp_min(1e-12)
+            acts = _relative(acts)
         drive = torch.einsum("bpu,bpuk->bpk", acts, self.W) / self.norm.clamp_min(1e-12)     # (B, P, N)
         drive = drive.clamp(0.0, 1.0)
         gate = self.strength[:, :, None] * present[:, :, None] * self.wired  # (B, P, N)
@@ -186,7 +193,7 @@ class ObjectHub(nn.Module):
         present, mask = present.bool(), mask.bool()
         active = present & mask[:, None]
         if graded:
-            pattern = winners.to(self.W.dtype) / winners.amax(-1, keepdim=True).clamp_min(1e-12)
+            pattern = _relative(winners.to(self.W.dtype))
             pattern = torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
             if (active & (pattern.sum(-1) == 0)).any():
                 raise ValueError("a present map has no activity to store")

@@ -20,7 +20,7 @@ import numpy as np
 import pybullet as p
 
 from sim.objects import archimedes_cm3
-from sim.perception import render
+from sim.perception import render, rests_on_bottom
 from sim.water import CM
 
 
@@ -176,10 +176,10 @@ def true_values(spec) -> dict:
 
 
 def _rests_on_bottom(world, body: int) -> bool:
-    """What the robot sees in the jar once it is still: the object lies on the bottom (a contact with the jar's
-    floor plate pushing it up) or it floats."""
-    contacts = p.getContactPoints(body, world.tank.jar_body, -1, -1, physicsClientId=world.client)
-    return any(c[7][2] > 0.7 for c in contacts)   # contactNormalOnB, from the floor towards the object: up
+    """Did it sink? Seen through the glass by a camera (sim.perception.rests_on_bottom), from the robot's left."""
+    tank, (ax, ay) = world.tank, world.away            # world.away: unit vector from the robot to the jar
+    return rests_on_bottom(world.client, body, (tank.jar_body, tank.water_visual), world.config.jar_xy,
+                           tank.bottom_z, (-ay, ax))
 
 
 def inspect_object(world, name: str) -> dict:

@@ -38,10 +38,10 @@ class GeneratorConfig:
     jar_diameter_cm: tuple = (11.0, 16.0)
     jar_height_cm: tuple = (18.0, 24.0)
     water_fraction: tuple = (0.6, 0.75)
-    # smallest side: a 2 cm object is still a handful of pixels and a grip; lightest object 2 g (a displacement of
-    # 2 cm^3 is ~20 level-reading steps in the jar)
+    # smallest side: a 2 cm object is still a handful of pixels and a grip; lightest object 5 g: five standard
+    # deviations of the wrist's noise (sim/sensor_model.py), so its weight is felt at all
     min_side_cm: float = 2.0
-    min_mass_g: float = 2.0
+    min_mass_g: float = 5.0
     # an object displaces at most this share of the room between the water and the rim
     max_rise_fraction: float = 0.8
     # a cylinder's height over its diameter, a box's sides over its longest: log-uniform up to this aspect

@@ -329,3 +329,32 @@ def look(client: int, body: int, ws: Workspace, camera: CameraConfig = CameraCon
 def measure(client: int, body: int, mass_g: float, ws: Workspace, camera: CameraConfig = CameraConfig()) -> dict:
     """The measurement dict for a body standing at rest on the stand, given the mass felt when it was lifted."""
     return {**look(client, body, ws, camera).measurement, "mass_g": float(mass_g)}
+
+
+def rests_on_bottom(client: int, body: int, hidden: tuple, jar_xy, bottom_z: float, direction_xy,
+                    tolerance_m: float = 0.006, fov_deg: float = 50.0, size: int = 128) -> bool:
+    """What the robot sees in the jar once everything is still: does the object lie on the bottom (it sank) or
+    float? One side view through the glass, level with the jar's lower part, from 35 cm away along `direction_xy`
+    (from the jar; across the line from the robot to the jar, so neither the robot's body nor the ball at the far
+    wall stands in front of the object); the glass and the water are see-through to the eye (their visuals,
+    `hidden` body ids, are made invisible for the render and restored). The object sank when its lowest visible
+    point is within `tolerance_m` (two pixels) of the jar's inner bottom: a floater rides at least its draft above
+    it."""
+    saved = []
+    for b in hidden:
+        rgba = p.getVisualShapeData(b, physicsClientId=client)[0][7]
+        saved.append((b, rgba))
+        p.changeVisualShape(b, -1, rgbaColor=[*rgba[:3], 0.0], physicsClientId=client)
+    try:
+        centre = np.array([jar_xy[0], jar_xy[1], bottom_z + 0.06])
+        d = np.asarray(direction_xy, dtype=float)
+        eye = centre + np.append(d / np.linalg.norm(d) * 0.35, 0.0)
+        view = take_view(client, eye, centre, [0, 0, 1], fov_deg, size, size, 0.02, 2.0)
+    finally:
+        for b, rgba in saved:
+            p.changeVisualShape(b, -1, rgbaColor=list(rgba), physicsClientId=client)
+    rows, cols = np.nonzero(view.seg == body)
+    if len(rows) == 0:
+        raise RuntimeError(f"body {body} is not in view of the jar camera")
+    lowest = view.back_project(rows, cols, dv=0.5)[:, 2].min()   # each pixel's lower edge
+    return bool(lowest - bottom_z < tolerance_m)

@@ -35,6 +35,9 @@ def test_heavy_cylinder_episode(world, heavy):
     assert out.level_before_cm == pytest.approx(14.0, abs=0.002)
     assert out.level_after_cm - out.level_before_cm == pytest.approx(365.3 / (36 * np.pi), abs=0.03)
     assert not out.goal_reachable_before and out.goal_reached_after
+    # the camera sees it on the bottom; the engine agrees (it touches the jar's floor plate)
+    floor = p.getContactPoints(body, world.tank.jar_body, -1, -1, physicsClientId=world.client)
+    assert out.sank and any(c[7][2] > 0.7 for c in floor)
     # the hand took it: it was lifted and weighed (the felt load, not the label), and it ended in the jar
     assert out.measurement["mass_g"] == pytest.approx(420.0, abs=4 * NOISE_G + 0.5)
     pos = np.asarray(p.getBasePositionAndOrientation(body, physicsClientId=world.client)[0])
@@ -60,6 +63,8 @@ def test_frames_are_recorded_and_saved(heavy, tmp_path):
 def test_light_cylinder_floats_and_the_goal_stays_out_of_reach(world):
     out = world.run_episode("red_light_cylinder")
     assert out.observed_cm3 == pytest.approx(14.0, rel=0.02)
+    assert not out.sank and not p.getContactPoints(world.body, world.tank.jar_body, -1, -1,
+                                                   physicsClientId=world.client)
     assert not out.goal_reachable_before and not out.goal_reached_after
     assert out.measurement["mass_g"] == pytest.approx(14.0, abs=4 * NOISE_G + 0.5)
     assert out.frames == []
