@@ -171,3 +171,17 @@ def test_batched_agents_match_single_agents_and_state_dict_round_trips():
     copy.load_state_dict(both.state_dict())
     probe = {k: torch.cat([v, v]) for k, v in lifted(RED, 400).items()}
     assert torch.equal(copy.predict(probe), both.predict(probe))
+
+
+def test_pairwise_evidence_gives_the_batch_answer_of_the_paper_episodes(paper):
+    """The three cylinders of the paper through the agent's own maps: the same answer as worked by hand in
+    tests/test_rules.py (colour irrelevant, shape and size likely irrelevant, weight dominant)."""
+    from aesop_torch.rules import DOMINANT, IRRELEVANT, LIKELY_IRRELEVANT, batch_knowledge
+    agent = paper[0]
+    m = {k: torch.cat([lifted(RED, 420)[k], lifted(BLUE, 420)[k], lifted(RED, 14)[k]]) for k in lifted(RED, 1)}
+    delta_p, delta_c, context = agent.pairwise_evidence(m, torch.tensor([365.0, 365.0, 14.0]),
+                                                        torch.tensor([True, True, False]))
+    assert delta_p[0, 1].tolist() == [True, False, False, False] and not delta_c[0, 1]
+    assert delta_p[0, 2].tolist() == [False, False, False, True] and delta_c[0, 2]
+    assert batch_knowledge(delta_p, delta_c, context).tolist() == [IRRELEVANT, LIKELY_IRRELEVANT, LIKELY_IRRELEVANT,
+                                                                   DOMINANT]
