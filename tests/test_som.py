@@ -177,3 +177,22 @@ def test_bad_input_raises_value_error():
         som.train_online(torch.zeros(4, 3), 0, torch.Generator())
     with pytest.raises(ValueError, match="rows, cols and dim"):
         SOMConfig(rows=0)
+
+
+def test_decode_reads_the_input_back_from_the_population():
+    # a hand-set 1 x 4 codebook and a gaussian width of 0.3: the response to 0.3 is exp(-(0.3 - w)^2 / 0.18)
+    som = SelfOrganizingMap(SOMConfig(rows=1, cols=4, dim=1, activity_sigma=0.3))
+    som.weights.copy_(torch.tensor([[0.0], [0.4], [0.8], [1.2]]))
+    a = som.activity(torch.tensor([[0.3], [0.65]]))
+    assert torch.allclose(a[0], torch.exp(-(0.3 - som.weights[:, 0]) ** 2 / 0.18))
+    assert som.decode(a)[:, 0].tolist() == pytest.approx([0.3, 0.65], abs=1e-5)    # the winner alone: 0.4, 0.8
+    assert som.decode(0.2 * a)[:, 0].tolist() == pytest.approx([0.3, 0.65], abs=1e-5)   # a scaled copy reads the same
+    # 2-d inputs on a hand-set 2 x 2 map
+    som2 = SelfOrganizingMap(SOMConfig(rows=2, cols=2, dim=2, activity_sigma=0.5))
+    som2.weights.copy_(torch.tensor([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0], [1.0, 1.0]]))
+    x = torch.tensor([[0.2, 0.7]])
+    assert som2.decode(som2.activity(x)).tolist()[0] == pytest.approx([0.2, 0.7], abs=1e-5)
+    # a single active unit (the others below the floor): its codebook vector; silence: NaN
+    one = torch.tensor([[0.0, 1.0, 0.0, 0.0]])
+    assert som.decode(one)[0, 0].item() == pytest.approx(0.4)
+    assert torch.isnan(som.decode(torch.zeros(1, 4))).all()
