@@ -203,8 +203,12 @@ class CausalRules(nn.Module):
         return torch.where(self.state == IRRELEVANT, torch.full_like(s, c.eliminated_strength), s)
 
     def context_strength(self, dtype=torch.float32) -> torch.Tensor:
-        """(B, C, P) the pathway strength within each context: eliminated there, or the agent's overall strength."""
-        s = self.strength_from_knowledge(dtype)[:, None, :].expand(self.eliminated.shape)
+        """(B, C, P) the pathway strength within each context: drastically reduced where the property was eliminated
+        in that context; elsewhere the agent's overall strength, except that a property irrelevant only because of
+        another context keeps its pathway here (1): whether it matters here is this context's evidence to show, and
+        the knowledge presumes it irrelevant anyway unless that evidence needs it (see `_derive`)."""
+        s = self.strength_from_knowledge(dtype)
+        s = torch.where(self.state == IRRELEVANT, torch.ones_like(s), s)[:, None, :].expand(self.eliminated.shape)
         return torch.where(self.eliminated, torch.full_like(s, self.config.eliminated_strength), s)
 
     def knowledge(self, b: int = 0) -> dict:

@@ -64,12 +64,12 @@ def test_empty_memory_and_unknown_cue_recall_nothing():
 
 
 def test_graded_cue_recalls_the_episode_with_the_cue_strength():
-    # an object differing in one property of four: 0.75 on the stored assembly, a little activity elsewhere (below
-    # MemoryConfig.min_strength: not a memory of the cue)
+    # an object differing in one property of four: 0.75 on the stored assembly, a little activity elsewhere
     q = cue((A, 0.75)) + 0.03 * (1 - A[OBJ].float())
     out = memory(A, B, Cc).recall(q)
-    assert out.valid[0].sum() == 1 and torch.equal(out.episodes[0, 0], A)
-    assert out.strength[0, 0].item() == pytest.approx(0.75)
+    assert torch.equal(out.episodes[0, 0], A) and out.strength[0, 0].item() == pytest.approx(0.75)
+    # what else the faint activity touches comes back too, weakest last, each with the little it shares
+    assert (out.strength[0, 1:][out.valid[0, 1:]] <= 0.03 + 1e-6).all()
 
 
 def test_cue_overlapping_two_objects_recalls_both_strongest_first():
