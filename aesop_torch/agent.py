@@ -18,10 +18,8 @@ Choices the paper leaves open, made here:
 - Prediction: a recall-strength-weighted readout that follows the dominant properties. Recalled episodes are split
   by what became of their objects (floated or sank); within each, the log reward is fitted as a linear function of
   the properties dominant in that context (weighted least squares, weights = recall strength), and read at the
-  present object's values. Where both fits exist and every recalled episode displaced no more than the other
-  context's fit predicts for it (what the agent sees in its own memory: a floater displaces less than a sinker of
-  its size would, a sinker less than a floater of its weight), the lesser of the two is expected; otherwise the
-  fit of the strongest recall's context.
+  present object's values. Which fit applies, when both exist, comes from the recalled fates too: a logistic
+  boundary over the properties not known irrelevant (heavy for its size sinks), read at the present object.
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
   most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
   recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
@@ -39,7 +37,7 @@ from torch import nn
 from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
 from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
-from .rules import (DOMINANT, ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, context_of, contradiction,
+from .rules import (DOMINANT, ELIMINATION, IRRELEVANT, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, context_of, contradiction,
                     outcome_unclear)
 from .som import SelfOrganizingMap
 
@@ -79,6 +77,9 @@ class AgentConfig:
     # ridge of the readout's fit, relative to its total weight: enough to make a fit on one episode (or on episodes
     # that share a value) flat instead of singular, too little to bend a fit on values that differ.
     readout_ridge: float = 1e-5
+    # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
+    # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
+    fate_ridge: float = 1e-2
     seed: int = 0
 
     def __post_init__(self):
@@ -228,22 +229,39 @@ class Agent(nn.Module):
         lhs = torch.einsum("bckf,bck,bckg->bcfg", A, w, A) + ridge * total[..., None, None].clamp_min(1e-12)
         lhs = lhs + torch.eye(1 + F, dtype=d.dtype) * 1e-12                       # an empty context stays solvable
         beta = torch.linalg.solve(lhs, torch.einsum("bckf,bck,bk->bcf", A, w, y))  # (B, 2, 1 + F)
-        law = torch.einsum("bckf,bcf->bck", A, beta)                              # each context's fit at each episode
         pred = torch.where(total > 0, beta[..., 0], torch.full_like(total, float("nan")))   # (B, 2) log cm^3
         both = (total > 0).all(-1)
-        # the lesser law holds if no recalled episode displaced more than the other context's fit predicts for it
-        slack = math.log(1.0 + self.config.rules.contradiction_rel)
-        other = torch.stack([law[:, 1], law[:, 0]], 1)                            # (B, 2, K): the other fit
-        seen = (weight > 0) & (fates >= 0)
-        over = torch.stack([(fates == c) & seen & (other[:, c] < y - slack) for c in range(2)], 0).any(0).any(-1)
-        lesser = torch.nan_to_num(pred, nan=float("inf")).amin(-1)
-        strongest = torch.where(seen, weight, torch.full_like(weight, -1.0)).argmax(-1)
-        fate0 = fates.gather(1, strongest[:, None])[:, 0].clamp(min=0)
-        by_fate = pred.gather(1, fate0[:, None])[:, 0]
+        # which fit applies: will it float or sink? Learned from the recalled episodes' fates, a logistic boundary
+        # over the properties not known irrelevant (heavy for its size sinks), read at the present object
+        relevant = torch.zeros(B, F, dtype=torch.bool)
+        for i, name in enumerate(PROPERTIES):
+            relevant[:, FEATURE_COLUMNS[name]] = (self.rules.state[:, i] != IRRELEVANT)[:, None]
+        sinks = self._will_sink(relevant, xk - x[:, None], fates, weight)
+        chosen = pred.gather(1, (sinks > 0.5).long()[:, None])[:, 0]
         single = torch.nan_to_num(pred, nan=float("inf")).amin(-1)               # the one context with a fit
-        out = torch.where(both, torch.where(over, by_fate, lesser), single)
+        out = torch.where(both, chosen, single)
         out = torch.where((total > 0).any(-1), out, torch.full_like(out, float("nan")))
         return out.exp().to(dtype)
+
+    def _will_sink(self, cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: torch.Tensor,
+                   steps: int = 12) -> torch.Tensor:
+        """P(sinks) of the present object: logistic regression of the recalled episodes' fates (B, K) on their
+        features relative to the present object's, d (B, K, F), over the feature columns `cols` (B, F); every recalled
+        episode counts once (a boundary needs its far examples as much as its near ones), Newton steps with a small
+        ridge (the classes are often separable). Its intercept is the log-odds at the present object."""
+        B, K, F = d.shape
+        A = torch.cat([torch.ones(B, K, 1, dtype=d.dtype), d * cols[:, None]], -1)  # (B, K, 1 + F)
+        w = (weight > 0) * (fates >= 0)
+        y = (fates == 1).to(d.dtype)
+        ridge = torch.eye(1 + F, dtype=d.dtype) * self.config.fate_ridge
+        ridge[0, 0] = 1e-6
+        beta = torch.zeros(B, 1 + F, dtype=d.dtype)
+        for _ in range(steps):
+            prob = torch.sigmoid(torch.einsum("bkf,bf->bk", A, beta))
+            grad = torch.einsum("bkf,bk->bf", A, w * (y - prob)) - beta @ ridge
+            hess = torch.einsum("bkf,bk,bkg->bfg", A, w * prob * (1 - prob), A) + ridge
+            beta = beta + torch.linalg.solve(hess, grad[..., None])[..., 0]
+        return torch.sigmoid(beta[:, 0])
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
