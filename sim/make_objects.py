@@ -33,7 +33,7 @@ SHAPE_ORDER = ("cylinder", "cube", "sphere", "box")
 class GeneratorConfig:
     # densities log-uniform over this range: corks and wood (0.15-0.8) to plastics, stone and light metals (1.2-3)
     density_g_cm3: tuple = (0.15, 3.0)
-    # a random jar: inner diameter, height and the water's share of the height; SPEC-like jars around the
+    # a random jar: inner diameter, height and the water's share of the height; jars around the
     # default (12 cm wide), wide enough for the hand's objects beside the 4 cm ball
     jar_diameter_cm: tuple = (11.0, 16.0)
     jar_height_cm: tuple = (18.0, 24.0)
