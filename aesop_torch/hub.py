@@ -33,9 +33,10 @@ class HubConfig:
     assembly_size: int = 5
     # the memory holds ~230 episodes, so an agent never needs more distinct objects than that
     max_assemblies: int = 230
-    # `match` above this: the object is already known. The same object seen again scores 1 (relative activity) or
-    # a little less (a remeasurement a hair off), one of four equally weighted properties changed scores <= 0.75
-    # (a bit more if the new value is close to the old one); 0.85 sits between.
+    # `match` above this: the object is already known and its assembly is reused. The same object seen again scores
+    # 1 (relative activity) or a hair less (a remeasurement within the senses' noise); with graded storage a
+    # similar but different object scores high too (one property moved by one map unit: ~0.95 with weight at the
+    # dominant strength), and two objects sharing an assembly would blur each other's stored values: 0.97.
     match_threshold: float = 0.97
     # the map that holds names, for `cross_modal`
     word_map: str = "word"

@@ -76,7 +76,8 @@ class MemoryConfig:
     # objects came in: measured on generated sets of seeds 1000-1039, 87.5 % of sets agreed in all 24 orders at
     # 0.05, 97.5 % at 0.001.)
     min_strength: float = 0.001
-    # most episodes recalled for one cue: the experiment encodes at most its 8 training objects.
+    # most episodes recalled for one cue, a bound for speed: the default experiment encodes at most its 8 training
+    # objects, so it never cuts a recall there (longer runs recall their 8 strongest).
     max_recalls: int = 8
     # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the
     # (256, 1000) working tensors in cache, measured 1.5x faster than 4096 agents at once and 1.2x faster than
