@@ -2,13 +2,13 @@
 
 from .agent import Agent, AgentConfig, EpisodeStep
 from .encoders import EncoderConfig, SensoryEncoder
-from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode
+from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
-from .rules import CausalRules, RulesConfig
+from .rules import CausalRules, RulesConfig, batch_knowledge
 from .som import SelfOrganizingMap, SOMConfig
 
 __all__ = [
-    "Agent", "AgentConfig", "EpisodeStep", "EncoderConfig", "SensoryEncoder", "ActionHub", "BodyHub", "HubConfig",
-    "ObjectHub", "RewardCode", "EpisodicMemory", "MemoryConfig", "CausalRules", "RulesConfig",
-    "SelfOrganizingMap", "SOMConfig",
+    "Agent", "AgentConfig", "EpisodeStep", "EncoderConfig", "SensoryEncoder", "ActionHub", "BodyHub", "Fate",
+    "HubConfig", "ObjectHub", "RewardCode", "EpisodicMemory", "MemoryConfig", "CausalRules", "RulesConfig",
+    "batch_knowledge", "SelfOrganizingMap", "SOMConfig",
 ]
