@@ -206,7 +206,10 @@ def test_ctrl_c_in_a_terminal_ends_with_one_line_workers_included(tmp_path):
     f.write_text(json.dumps({"train": [GOOD, obj(name="blue", color="blue")]}))
     out = tmp_path / "out"
     cmd = [sys.executable, str(ROOT / "train" / "run.py"), "--objects", str(f), "--orders", "listed", "--out", str(out)]
-    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True)
+    # a terminal's foreground job takes Ctrl-C: SIGINT at its default disposition, whatever started this test (a
+    # background job, nohup or a CI runner may have it ignored, and an ignored SIGINT is inherited through exec)
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     while "simulating" not in (line := p.stdout.readline()):
         assert line, p.stderr.read()
     time.sleep(0.5)   # the workers are starting up or simulating

@@ -5,10 +5,8 @@ Every drop and every inspection rebuilds the scene from scratch and seeds its se
 simulated before. That makes the physics embarrassingly parallel: the profile of a default run showed the drops
 and inspections (13 independent simulations) taking 9 of its 12 s, so they run on every core at once.
 
-Ctrl-C belongs to the runner: the workers are started with SIGINT blocked (so not even their start-up imports can
-print a traceback) and then ignore it, and the runner ends the pool, says one line and keeps its last checkpoint. The
-runner blocks SIGINT, rather than ignoring it, while it starts them: a Ctrl-C in that moment stays pending and
-interrupts the runner as soon as the pool is up, instead of being lost.
+Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
+imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
 """
 
 from __future__ import annotations
@@ -16,13 +14,14 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import threading
 
 _WORLD = None  # one World per worker process
 
 
 def _init(objects, seed: int) -> None:
     global _WORLD
-    signal.signal(signal.SIGINT, signal.SIG_IGN)   # blocked since exec: ignoring it discards one that is pending
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since exec; kept should a start method differ
     import torch
 
     torch.set_num_threads(1)  # one process per core
@@ -68,12 +67,14 @@ class Physics:
             return results
         if self._pool is None:
             ctx = mp.get_context("spawn")  # a fresh interpreter: no pybullet client or torch threads inherited
-            mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})   # inherited through fork and exec
+            main = threading.current_thread() is threading.main_thread()   # only it may set handlers
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited through exec
             try:
                 self._pool = ctx.Pool(min(self.workers, len(jobs)), initializer=_init,
                                       initargs=(self.objects, self.seed))
             finally:
-                signal.pthread_sigmask(signal.SIG_SETMASK, mask)   # a Ctrl-C meanwhile is delivered now
+                if main:
+                    signal.signal(signal.SIGINT, previous)
         results = []
         for j, r in zip(jobs, self._pool.imap(_task, jobs, chunksize=1)):
             results.append(r)
