@@ -45,6 +45,7 @@ from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.population import knowledge_keys  # noqa: E402
+from train.progress import Step  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 PNG = Path(__file__).with_name("generalization.png")
@@ -148,7 +149,11 @@ def main():
         cfg = AgentConfig()
         cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
         template = Agent(cfg, batch=1)
-        results[n_train] = [run_set(template, a.first_seed + i, n_train, a.orders) for i in range(n_sets)]
+        with Step(f"sets of {n_train}", n_sets, unit="set", stream=sys.stderr) as bar:   # stderr: not recorded
+            results[n_train] = []
+            for i in range(n_sets):
+                results[n_train].append(run_set(template, a.first_seed + i, n_train, a.orders))
+                bar.update(1)
         print(f"{n_sets} sets of {n_train} train objects x {a.orders} orders: {time.perf_counter() - t0:.0f} s",
               flush=True)
 

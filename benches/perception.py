@@ -33,6 +33,7 @@ from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects  # noqa: 
 from sim.oracle import truth  # noqa: E402
 from sim.world import World  # noqa: E402
 from train.physics import cores  # noqa: E402
+from train.progress import Step  # noqa: E402
 
 POSES = {"cylinder": ("upright", "turned"), "cube": ("upright", "turned"), "sphere": ("upright", "turned"),
          "box": ("upright", "turned", "on_side")}
@@ -136,13 +137,16 @@ def main(args) -> None:
     world = World(load_objects(DEFAULT_OBJECTS_FILE), seed=args.seed)
     world.look(world.place_on_stand("red_heavy_cylinder"))   # warm-up: first-call costs out of the times
     results, by_group = [], {}
-    for shape, poses in POSES.items():
-        for pose in poses:
-            for i in range(args.per_pose):
-                spec, orn = generate(shape, pose, i, rng)
-                r = measure_one(world, spec, orn)
-                results.append(r)
-                by_group.setdefault((shape, pose), []).append(r)
+    total = sum(len(poses) for poses in POSES.values()) * args.per_pose
+    with Step("looking at objects", total, unit="object", stream=sys.stderr) as bar:   # stderr: not recorded
+        for shape, poses in POSES.items():
+            for pose in poses:
+                for i in range(args.per_pose):
+                    spec, orn = generate(shape, pose, i, rng)
+                    r = measure_one(world, spec, orn)
+                    results.append(r)
+                    by_group.setdefault((shape, pose), []).append(r)
+                    bar.update(1, f"{shape} {pose}")
     print(f"perception vs the engine's truth: {len(results)} objects, sides {SIDE_CM[0]}-{SIDE_CM[1]} cm, "
           f"{cores()} cores, seed {args.seed}")
     print("extent: worst side's relative error per object (%); fill: |error|; rgb: worst channel |error| (0..1); "

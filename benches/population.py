@@ -25,6 +25,7 @@ from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders  # noqa: E402
 from train.population import run_population  # noqa: E402
+from train.progress import Step  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 POPULATIONS = ("1", "100", "10000", "all")
@@ -44,7 +45,8 @@ def main():
     for which in POPULATIONS:
         orders = draw_orders(n, which, seed=0)
         t0 = time.perf_counter()
-        pop = run_population(train, probe_names, orders, outcomes, probes, AgentConfig())
+        with Step(f"{len(orders)} order(s)", len(orders), unit="order", stream=sys.stderr, announce=False) as bar:
+            pop = run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), progress=bar.to)
         wall = time.perf_counter() - t0
         t = pop["timing_s"]
         print(f"{len(orders):>7} {wall:>7.2f} {len(orders) * n / wall:>17.0f} {pop['agent_steps']:>12} "
