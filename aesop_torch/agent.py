@@ -42,7 +42,8 @@ from .rules import (DOMINANT, ELIMINATION, IRRELEVANT, GROWTH, STATUS_QUO, UNCER
 from .som import SelfOrganizingMap
 
 # Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order.
-ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE = range(8)
+ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE, ROW_REWARD_FINE = range(9)
+AGENT_ROW_K = tuple(5 if r == ROW_OBJECT else 1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 # the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass
 FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 5), "weight": slice(5, 6)}
 N_FEATURES = 6
@@ -52,7 +53,11 @@ N_FEATURES = 6
 class AgentConfig:
     encoder: EncoderConfig = field(default_factory=EncoderConfig)
     hub: HubConfig = field(default_factory=HubConfig)
-    memory: MemoryConfig = field(default_factory=MemoryConfig)
+    # the sheet's rows as the agent uses them: the object's 5-neuron assembly, and the reward's coarse and fine
+    # units each on a row of its own (k = 1: its inhibitory pool lets exactly one win, so a recalled reward is always
+    # one coarse and one fine unit; on one shared 2-of-50 row, recalling 16 episodes brought back two coarse units
+    # instead in 22 of 92 recalls, and first recalls were exact for 11 of 16 objects instead of 14)
+    memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K))
     rules: RulesConfig = field(default_factory=RulesConfig)
     # the property maps are trained before the experiment on the infant's prior experience; 4000 samples cover
     # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
@@ -185,13 +190,21 @@ class Agent(nn.Module):
         """Perceive, recall and read out the expected displacement; learns nothing."""
         acts, present = self.activities(measurement)
         recall = self.memory.recall(self.hub.bottom_up(acts, present))
-        rewards = self.reward.decode(recall.episodes[:, :, ROW_REWARD])          # (B, K), NaN where not valid
+        rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
         values = self.decode(acts)
         recalled = self.decode(self.retro_activate(recall.episodes[:, :, ROW_OBJECT]))
         expected = self.readout(self.features(values), self.features(recalled), rewards, fates,
                                 recall.strength * recall.valid)
         return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates)
+
+    def _reward_row(self, episodes: torch.Tensor) -> torch.Tensor:
+        """(..., rows, cols) sheets -> (..., cols) the reward's 2-hot row, from its coarse and fine rows."""
+        c, f = self.reward.config.coarse, self.reward.config.fine
+        row = torch.zeros_like(episodes[..., ROW_REWARD, :])
+        row[..., :c] = episodes[..., ROW_REWARD, :c]
+        row[..., c:c + f] = episodes[..., ROW_REWARD_FINE, :f]
+        return row
 
     def _fates(self, recall) -> torch.Tensor:
         row = recall.episodes[:, :, ROW_FATE]                                   # (B, K, N)
@@ -351,7 +364,10 @@ class Agent(nn.Module):
         sheet[:, ROW_OBJECT] = assembly
         for row, action in ((ROW_REACH, "reach"), (ROW_GRASP, "grasp"), (ROW_DROP, "drop")):
             sheet[:, row] = self.actions.encode([action] * B)
-        sheet[:, ROW_REWARD] = self.reward.encode(observed)
+        code = self.reward.encode(observed)                                      # 2-hot: coarse and fine unit
+        c = self.reward.config.coarse
+        sheet[:, ROW_REWARD, :c] = code[:, :c]                                    # each on a row of its own
+        sheet[:, ROW_REWARD_FINE, :self.reward.config.fine] = code[:, c:c + self.reward.config.fine]
         sheet[:, ROW_BODY_END] = self.body.encode(["goal_reached" if r else "goal_unreachable"
                                                    for r in goal_after.tolist()])
         seen = fate >= 0
