@@ -37,16 +37,22 @@ from torch import nn
 from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
 from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
 from .memory import EpisodicMemory, MemoryConfig
-from .rules import (DOMINANT, ELIMINATION, IRRELEVANT, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig, context_of, contradiction,
-                    outcome_unclear)
+from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
+                    context_of, contradiction, outcome_unclear)
 from .som import SelfOrganizingMap
 
 # Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order.
-ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE, ROW_REWARD_FINE = range(9)
+(ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE,
+ ROW_REWARD_FINE) = range(9)
 AGENT_ROW_K = tuple(5 if r == ROW_OBJECT else 1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 # the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass
 FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 5), "weight": slice(5, 6)}
-N_FEATURES = 6
+
+
+def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
+    """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS)."""
+    return torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
+                      for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
 
 
 @dataclass
@@ -179,7 +185,7 @@ class Agent(nn.Module):
             self.config.hub.assembly_size
 
     def features(self, values: dict) -> torch.Tensor:
-        """Decoded values -> (..., N_FEATURES) readout features: rgb, log fill, log size (cm), log mass (g)."""
+        """Decoded values -> (..., 6) readout features (FEATURE_COLUMNS): rgb, log fill, log size (cm), log mass (g)."""
         e = self.config.encoder
         size = values["size"][..., :1] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm)
         mass = values["weight"][..., :1] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g)
@@ -229,10 +235,7 @@ class Agent(nn.Module):
         dom = self.rules.dominant[:, :2]
         fallback = (self.rules.state == DOMINANT)[:, None] & ~self.rules.eliminated[:, :2]
         follow = torch.where(dom.any(-1, keepdim=True), dom, fallback)           # (B, 2, P)
-        cols = torch.zeros(B, 2, F, dtype=torch.bool)
-        for i, name in enumerate(PROPERTIES):
-            cols[:, :, FEATURE_COLUMNS[name]] = follow[:, :, i, None]
-        d = (xk[:, None] - x[:, None, None]) * cols[:, :, None]                   # (B, 2, K, F) centred features
+        d = (xk[:, None] - x[:, None, None]) * feature_columns(follow)[:, :, None]   # (B, 2, K, F) centred
         A = torch.cat([torch.ones(B, 2, K, 1, dtype=d.dtype), d], -1)            # (B, 2, K, 1 + F)
         ctx = torch.arange(2)[None, :, None]
         w = weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0))   # unseen fates count in both
@@ -246,10 +249,7 @@ class Agent(nn.Module):
         both = (total > 0).all(-1)
         # which fit applies: will it float or sink? Learned from the recalled episodes' fates, a logistic boundary
         # over the properties not known irrelevant (heavy for its size sinks), read at the present object
-        relevant = torch.zeros(B, F, dtype=torch.bool)
-        for i, name in enumerate(PROPERTIES):
-            relevant[:, FEATURE_COLUMNS[name]] = (self.rules.state[:, i] != IRRELEVANT)[:, None]
-        sinks = self._will_sink(relevant, xk - x[:, None], fates, weight)
+        sinks = self._will_sink(feature_columns(self.rules.state != IRRELEVANT), xk - x[:, None], fates, weight)
         chosen = pred.gather(1, (sinks > 0.5).long()[:, None])[:, 0]
         single = torch.nan_to_num(pred, nan=float("inf")).amin(-1)               # the one context with a fit
         out = torch.where(both, chosen, single)
@@ -259,9 +259,9 @@ class Agent(nn.Module):
     def _will_sink(self, cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: torch.Tensor,
                    steps: int = 12) -> torch.Tensor:
         """P(sinks) of the present object: logistic regression of the recalled episodes' fates (B, K) on their
-        features relative to the present object's, d (B, K, F), over the feature columns `cols` (B, F); every recalled
-        episode counts once (a boundary needs its far examples as much as its near ones), Newton steps with a small
-        ridge (the classes are often separable). Its intercept is the log-odds at the present object."""
+        features relative to the present object's, d (B, K, F), over the feature columns `cols` (B, F); every
+        recalled episode counts once (a boundary needs its far examples as much as its near ones), Newton steps with
+        a small ridge (the classes are often separable). Its intercept is the log-odds at the present object."""
         B, K, F = d.shape
         A = torch.cat([torch.ones(B, K, 1, dtype=d.dtype), d * cols[:, None]], -1)  # (B, K, 1 + F)
         w = (weight > 0) * (fates >= 0)

@@ -17,9 +17,10 @@ and the knowledge is a function of the evidence *set*, so it cannot depend on th
   properties matters. One changed property is the paper's clean case; several at once are a confound.
 - Dominant in a context: the properties of the minimal explanations. An explanation is a set of properties, none
   eliminated in the context (nor, unless the context's evidence needs it, in another), that holds a changed
-  property of every contradicted comparison (a hitting set of the change sets); the minimal ones are the smallest. A clean Growth forces its property in; a confound is
-  resolved by the rest of the evidence (colour changed together with weight is explained by weight once weight
-  explains the other contradictions), and a confound nothing resolves makes each candidate dominant.
+  property of every contradicted comparison (a hitting set of the change sets); the minimal ones are the smallest.
+  A clean Growth forces its property in; a confound is resolved by the rest of the evidence (colour changed
+  together with weight is explained by weight once weight explains the other contradictions), and a confound
+  nothing resolves makes each candidate dominant.
 - Knowledge per property, over contexts: dominant if dominant in some context; else irrelevant if eliminated in
   some context; else likely irrelevant if Uncertainty fired (the outcome changed while it did not), with a
   certainty that grows with each firing without reaching 1; else unknown.
@@ -172,9 +173,7 @@ class CausalRules(nn.Module):
         self.eliminated.copy_((excl[..., None] & self._weights) != 0)
         # A property eliminated in one context is presumed irrelevant in the others too, unless a contradiction
         # there can only be explained by it (Occam: no cause is added that the evidence does not need).
-        anywhere = torch.zeros_like(excl[:, 0])
-        for c in range(C):
-            anywhere |= excl[:, c]
+        anywhere = (self.eliminated.any(1).long() * self._weights).sum(-1)        # (B,) eliminated in any context
         presumed = excl | anywhere[:, None]
         needs = (self.contradicted & ((sets & ~presumed[..., None]) == 0) & ((sets & ~excl[..., None]) != 0)).any(-1)
         excl = torch.where(needs, excl, presumed)

@@ -167,12 +167,7 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
         level_before_cm=level_before, level_after_cm=level_after,
         archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
         goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
-        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=true_values(spec))
-
-
-def true_values(spec) -> dict:
-    """The object's true size, shape cue and mass (from the objects file), to log beside what was perceived."""
-    return {"extent_cm": [float(x) for x in spec.extent_cm], "fill": float(spec.fill), "mass_g": float(spec.mass_g)}
+        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=spec.true_values())
 
 
 def _rests_on_bottom(world, body: int) -> bool:

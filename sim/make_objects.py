@@ -109,7 +109,8 @@ def generate(seed: int, n_train: int = 8, n_probe: int = 8, pairs: bool = False,
     if jar == "random":
         d = round(rng.uniform(*cfg.jar_diameter_cm), 1)
         h = round(rng.uniform(*cfg.jar_height_cm), 1)
-        jar_d = {"inner_diameter_cm": d, "height_cm": h, "water_depth_cm": round(h * rng.uniform(*cfg.water_fraction), 1)}
+        depth = round(h * rng.uniform(*cfg.water_fraction), 1)
+        jar_d = {"inner_diameter_cm": d, "height_cm": h, "water_depth_cm": depth}
     elif jar == "default":
         jar_d = dict(zip(("inner_diameter_cm", "height_cm", "water_depth_cm"), config.default_jar))
     else:

@@ -157,6 +157,15 @@ class ObjectSpec:
             return math.pi * h * h * (3.0 * r - h) / 3.0  # spherical cap
         return self.volume_cm3 * h / self.height_cm  # prisms: cross-section x height
 
+    def exact_measurement(self) -> dict:
+        """What a perfect eye and hand would report: {rgb, extent_cm (descending), fill, mass_g}, plain floats."""
+        return {"rgb": [float(x) for x in self.rgb], "extent_cm": [float(x) for x in self.extent_cm],
+                "fill": float(self.fill), "mass_g": float(self.mass_g)}
+
+    def true_values(self) -> dict:
+        """The file's size, shape cue and mass, logged beside what was perceived (never given to the agent)."""
+        return {k: v for k, v in self.exact_measurement().items() if k != "rgb"}
+
     def to_dict(self) -> dict:
         return {"name": self.name, "shape": self.shape, "color": list(self.rgb), "dims_cm": list(self.dims_cm),
                 "mass_g": self.mass_g}

@@ -137,7 +137,7 @@ def test_readout_follows_each_fates_law_and_the_boundary_learned_from_memory():
 
 def test_delta_property_sees_an_eliminated_pathway(paper):
     agent = paper[0]
-    red, blue = agent.decode(agent.activities(lifted(RED, 420))[0]), agent.decode(agent.activities(lifted(BLUE, 420))[0])
+    red, blue = (agent.decode(agent.activities(lifted(rgb, 420))[0]) for rgb in (RED, BLUE))
     recalled = {p: v[:, None] for p, v in red.items()}
     full = torch.ones(1, 1, 4)
     changed, unclear = agent.delta_property(blue, recalled, full)

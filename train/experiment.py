@@ -54,16 +54,9 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
     lies between 14 and 365 cm^3)."""
     from sim.objects import archimedes_cm3
 
-    def exact(s):
-        return {"rgb": [float(x) for x in s.rgb], "extent_cm": [float(x) for x in s.extent_cm],
-                "fill": float(s.fill), "mass_g": float(s.mass_g)}
-
-    def true(s):  # for the logs, never given to the agent
-        return {k: v for k, v in exact(s).items() if k != "rgb"}
-
     def sensed(s):
         if sensor is None:
-            return exact(s), float(archimedes_cm3(s, objects.jar))
+            return s.exact_measurement(), float(archimedes_cm3(s, objects.jar))
         rng = sensor.rng(seed, s.name)
         return sensor.measure(s, rng), sensor.observe(s, objects.jar, rng)
 
@@ -73,7 +66,7 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
                             "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks),
-                            "true": true(s)}
+                            "true": s.true_values()}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
     return outcomes, probes
