@@ -12,8 +12,11 @@ The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not availab
   fails on the agent's episodes, which share most rows (the same reach, grasp and drop codes every time): the
   shared rows then pull every recall towards the majority episode. With the actual mean, a row every episode
   shares carries no weight (it is predicted by p alone) and a row no episode uses stays silent (p = 0, no weight).
-- Prediction: each neuron estimates its own activity from the others, a_i = p_i + sum_j J_ij d_j / sum_{j!=i} d_j^2
-  with d = s - p (p is the neuron's excitability, the division a global divisive inhibition). For a stored
+- Each neuron's deviation counts in units of its own spread sigma_i = sqrt(p_i (1 - p_i)) (MemoryConfig.zscore):
+  J~ = D^-1 J D^-1, d~ = (s - p) / sigma. Otherwise a row that takes one of two codes in every episode (the
+  object's fate, the goal) outweighs the sparse rows that tell episodes apart.
+- Prediction: each neuron estimates its own activity from the others, a_i = p_i + sigma_i sum_j J~_ij d~_j /
+  sum_{j!=i} d~_j^2 (p is the neuron's excitability, the division a global divisive inhibition). For a stored
   episode as the state, a = xi exactly when the stored deviations are orthogonal.
 - Inhibition: each row has its own inhibitory pool, a k-winners-take-all: at most k_r neurons of row r fire, and
   only those predicted above `threshold`, so a row with no support stays empty.
@@ -69,6 +72,12 @@ class MemoryConfig:
     # likely on than off"; a little lower lets rows with partial support join the completion early (300 random
     # episodes, 3 seeds: 98.2 / 98.0 / 97.7 % exact at 0.3 / 0.4 / 0.5; agent-like episodes are indifferent).
     threshold: float = 0.4
+    # each neuron's deviation in units of its own spread, sigma_i = sqrt(p_i (1 - p_i)) (the covariance rule on
+    # z-scored activity). The plain rule lets a row that takes one of two codes in every episode (floated / sank,
+    # goal reached or not: sigma 0.5) outweigh the sparse rows that tell episodes apart. Measured from the object
+    # row alone (tests/test_memory.py, benches/memory_capacity.py): the agent's own episodes exact up to ~32
+    # instead of ~16, random episodes exact at 300 instead of 97 %. False: the plain covariance rule.
+    zscore: bool = True
     # graded recall: every episode the cue touches at all is brought back (strongest first, up to max_recalls), and
     # whoever uses it weighs it by its strength (the agent's readout and rules do). Below this the cue shares
     # nothing with the retrieved state: float rounding, not a memory. (At 0.05, an object unlike every stored one in
@@ -129,8 +138,21 @@ class _Net(NamedTuple):
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
 
-    def predict(self, d: torch.Tensor) -> torch.Tensor:
-        """a = p + J d / sum_{j != i} d_j^2 for deviations d (B, N) from the mean, J of the patterns in play."""
+    def predict(self, d: torch.Tensor, zscore: bool = True) -> torch.Tensor:
+        """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean, d~ = d / sigma, and
+        J~ = D^-1 J D^-1 (D = diag(sigma)) of the patterns in play; zscore=False: sigma = 1, the plain covariance
+        rule. A neuron that never varies (sigma = 0) is predicted at its mean and is no evidence for the others."""
+        p = self.mean()
+        if not zscore:
+            return p + self.covariance_product(d) / ((d * d).sum(1, keepdim=True) - d * d).clamp(min=_EPS)
+        sigma = (p * (1 - p)).sqrt()
+        inv = torch.where(sigma > 1e-6, 1.0 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
+        dz = d * inv
+        h = self.covariance_product(dz * inv)                    # J (D^-1 d~); times D^-1 and sigma below: 1
+        return p + h * (sigma * inv) / ((dz * dz).sum(1, keepdim=True) - dz * dz).clamp(min=_EPS)
+
+    def covariance_product(self, d: torch.Tensor) -> torch.Tensor:
+        """J d for d (B, N), J = sum_mu (x_mu - p)(x_mu - p)^T with a zero diagonal, over the patterns in play."""
         x, S, n, z = self
         p = S / n.clamp(min=1)
         if x.shape[0] == 1 and d.shape[0] != 1:   # many cues against one memory: two plain matrix products
@@ -140,9 +162,7 @@ class _Net(NamedTuple):
         if z.shape[1]:   # a few depressed states per cue: elementwise beats tiny batched products
             h = h - ((z * d[:, None]).sum(-1, keepdim=True) * z).sum(1)
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
-        h = h - S * ((p * d).sum(1, keepdim=True) + (1 - p) * d)
-        norm = (d * d).sum(1, keepdim=True) - d * d   # leave-one-out: neuron i's own state is no evidence
-        return p + h / norm.clamp(min=_EPS)
+        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p) * d)
 
 
 class EpisodicMemory(nn.Module):
@@ -211,8 +231,13 @@ class EpisodicMemory(nn.Module):
         return x.mean(0) if x.shape[0] else torch.zeros(x.shape[1], dtype=x.dtype, device=x.device)
 
     def weights(self, b: int = 0) -> torch.Tensor:
-        """Agent b's dense (N, N) weights J = sum_mu (xi_mu - p)(xi_mu - p)^T with a zero diagonal."""
-        y = self._stored(b) - self.mean_activity(b)
+        """Agent b's dense (N, N) weights J = sum_mu y_mu y_mu^T with a zero diagonal, y = (xi_mu - p) / sigma
+        (0 where sigma = 0) with MemoryConfig.zscore, else y = xi_mu - p."""
+        p = self.mean_activity(b)
+        y = self._stored(b) - p
+        if self.config.zscore:
+            sigma = (p * (1 - p)).sqrt()
+            y = torch.where(sigma > 1e-6, y / sigma.clamp_min(1e-6), torch.zeros_like(y))
         J = y.T @ y
         J.fill_diagonal_(0.0)
         return J
@@ -228,7 +253,7 @@ class EpisodicMemory(nn.Module):
         """What the network predicts for every neuron given the others, for states (B, rows, cols) in [0, 1]."""
         net = self._net(slice(None), self.batch)
         s = state.flatten(1).to(net.x)
-        return net.predict(s - net.mean()).view(state.shape)
+        return net.predict(s - net.mean(), self.config.zscore).view(state.shape)
 
     # -- recall -----------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -301,7 +326,7 @@ class EpisodicMemory(nn.Module):
             idx, sub = torch.arange(B, device=cue.device), net   # the cues still moving
             for _ in range(steps):
                 cur = s[idx]
-                new = k_winners(sub.predict((cur - p[idx]).flatten(1)).view_as(cur), self.row_k,
+                new = k_winners(sub.predict((cur - p[idx]).flatten(1), c.zscore).view_as(cur), self.row_k,
                                 c.threshold).to(cur.dtype)
                 if clamp:
                     new[:, c.object_row] = cue[idx]

@@ -106,18 +106,24 @@ def test_paper_capacity_230_random_episodes():
 
 
 def test_weights_are_the_covariance_of_the_stored_episodes():
-    # two episodes: p = (A + B) / 2, so J = 2 * ((A - B) / 2)((A - B) / 2)^T = (A - B)(A - B)^T / 2, zero diagonal
-    mem = memory(A, B)
+    # two episodes: p = (A + B) / 2, so J = 2 * ((A - B) / 2)((A - B) / 2)^T = (A - B)(A - B)^T / 2, zero diagonal.
+    # z-scored: a neuron where A and B differ has p = 1/2 and sigma = 1/2, so y = +-1 there and 0 elsewhere:
+    # J~ = 2 (A - B)(A - B)^T
     d = (A.flatten().double() - B.flatten().double())
-    expected = torch.outer(d, d) / 2
-    expected.fill_diagonal_(0)
-    assert torch.equal(mem.weights(0), expected)
-    assert torch.equal(mem.mean_activity(0), (A.flatten().double() + B.flatten().double()) / 2)
+    for zscore, scale in ((False, 0.5), (True, 2.0)):
+        mem = memory(A, B, zscore=zscore)
+        expected = torch.outer(d, d) * scale
+        expected.fill_diagonal_(0)
+        assert torch.equal(mem.weights(0), expected)
+        assert torch.equal(mem.mean_activity(0), (A.flatten().double() + B.flatten().double()) / 2)
 
 
 def dense_predict(J, p, s):
-    d = s - p
-    return p + (J @ d) / ((d * d).sum() - d * d).clamp(min=1e-3)
+    """J from mem.weights (z-scored): a = p + sigma J~ d~ / sum_{j != i} d~_j^2, d~ = (s - p) / sigma."""
+    sigma = (p * (1 - p)).sqrt()
+    inv = torch.where(sigma > 1e-6, 1 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
+    d = (s - p) * inv
+    return p + sigma * (J @ d) / ((d * d).sum() - d * d).clamp(min=1e-3)
 
 
 def dense_recall(stored, q, cfg, K):
@@ -129,7 +135,9 @@ def dense_recall(stored, q, cfg, K):
             break
         x = torch.stack([e.flatten().double() for e in left])
         p = x.mean(0)
-        J = (x - p).T @ (x - p)
+        sigma = (p * (1 - p)).sqrt()
+        y = torch.where(sigma > 1e-6, (x - p) / sigma.clamp_min(1e-6), torch.zeros_like(x))
+        J = y.T @ y
         J.fill_diagonal_(0)
         s = p.clone().view(R, C)
         s[OBJ] = q
