@@ -181,8 +181,7 @@ class Agent(nn.Module):
     def retro_activate(self, assemblies: torch.Tensor) -> torch.Tensor:
         """(B, K, N) hub assemblies -> (B, K, P_all, U) the map activity each retro-activates at full strength
         (hub.ObjectHub.top_down before its strength gate: what the stored object looked like)."""
-        return torch.einsum("bkn,bpun->bkpu", assemblies.to(self.hub.W.dtype), self.hub.W) / \
-            self.config.hub.assembly_size
+        return self.hub.recall_patterns(assemblies)
 
     def features(self, values: dict) -> torch.Tensor:
         """Decoded values -> (..., 6) readout features (FEATURE_COLUMNS): rgb, log fill, log size (cm), log mass (g)."""

@@ -131,6 +131,19 @@ def test_least_used_neurons_give_disjoint_assemblies_then_reuse():
     assert hub.usage.sum() == 55 and hub.usage.max() == 2
 
 
+def test_codes_stay_apart_as_objects_multiply():
+    # 60 objects of 5 of 50 neurons: 600 neuron pairs in all, of the 1,225 there are, so every two assemblies can
+    # share at most one neuron, and allocation finds such codes (least-used alone gave the 11th object the 1st's)
+    hub = ObjectHub(MAPS, HubConfig(max_assemblies=60))
+    for i in range(60):
+        store(hub, [i % 4, i % 3, i % 2, i % 5, 0], PROPS, seed=i)
+    a = hub.assemblies[0].float()
+    shared = a @ a.T
+    assert torch.equal(shared.diagonal(), torch.full((60,), 5.0))
+    assert shared.fill_diagonal_(0).max() == 1
+    assert hub.usage.sum() == 300 and hub.usage.max() - hub.usage.min() <= 2
+
+
 def test_tie_breaks_come_from_the_generator():
     a = store(ObjectHub(MAPS), RED_CYL, PROPS, seed=3)
     b = store(ObjectHub(MAPS), RED_CYL, PROPS, seed=3)
