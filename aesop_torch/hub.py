@@ -27,10 +27,14 @@ N_NEURONS = 50  # one row of the episodic memory sheet
 
 @dataclass
 class HubConfig:
-    n_neurons: int = N_NEURONS
-    # 5-of-50: sparse enough that two objects' assemblies rarely overlap (least-used allocation gives 10 disjoint
-    # assemblies before any neuron is reused), dense enough for a reliable memory cue.
+    n_neurons: int = N_NEURONS      # neurons per row
+    # 5-of-50: sparse enough that two objects' assemblies rarely overlap (10 disjoint assemblies before any neuron
+    # is reused), dense enough for a reliable memory cue. Per row when the hub spans several rows.
     assembly_size: int = 5
+    # rows of the memory sheet the hub spans (n_neurons each; an assembly has assembly_size neurons on every row):
+    # one row by default, the paper's hub. One 50-neuron row holds ~1,200 distinct object codes, but a 5-neuron
+    # cue is too little signal to pull one of 230 episodes out of 1,000 neurons (see agent.AgentConfig)
+    rows: int = 1
     # the memory holds ~230 episodes, so an agent never needs more distinct objects than that
     max_assemblies: int = 230
     # `match` above this: the object is already known and its assembly is reused. The same object seen again scores
@@ -59,11 +63,13 @@ def _relative(acts: torch.Tensor) -> torch.Tensor:
 
 
 class ObjectHub(nn.Module):
-    """The object hub of B agents over P maps (properties and the word map), U_max = the largest map's units.
+    """The object hub of B agents over P maps (properties and the word map), U_max = the largest map's units,
+    N = n_neurons * rows hub neurons.
 
-    buffers: W (B, P, U_max, N) graded, strength (B, P) pathway gates (init 1), usage (B, N) assemblies per neuron,
-    assemblies (B, max_assemblies, N) bool the stored assemblies, branches (B, max_assemblies, P, U_max) each
-    one's stored patterns (W is their union over the objects a neuron codes for), n_assemblies (B,).
+    buffers: strength (B, P) pathway gates (init 1), usage (B, N) assemblies per neuron, assemblies
+    (B, max_assemblies, N) bool the stored assemblies, branches (B, max_assemblies, P, U_max) each one's stored
+    patterns, branch_norm (B, max_assemblies, P) their energies, n_assemblies (B,). W (B, P, U_max, N), the
+    connections from the maps onto each hub neuron, is their union (a property, for inspection).
     """
 
     def __init__(self, maps: dict[str, int], config: HubConfig | None = None, batch: int = 1):
@@ -71,26 +77,30 @@ class ObjectHub(nn.Module):
         self.config = c = config or HubConfig()
         if not maps or any(int(n) < 1 for n in maps.values()):
             raise ValueError(f"maps must name at least one map, each with >= 1 unit, got {maps}")
-        if not 1 <= c.assembly_size <= c.n_neurons:
-            raise ValueError(f"assembly_size must be in 1..{c.n_neurons}, got {c.assembly_size}")
+        if not 1 <= c.assembly_size <= c.n_neurons or c.rows < 1:
+            raise ValueError(f"assembly_size must be in 1..{c.n_neurons} and rows >= 1, got {c.assembly_size}, "
+                             f"{c.rows}")
         if batch < 1:
             raise ValueError(f"batch must be >= 1, got {batch}")
         self.names = tuple(maps)
-        P, U, N = len(maps), max(maps.values()), c.n_neurons
+        P, U, N = len(maps), max(maps.values()), c.n_neurons * c.rows
+        self.n_neurons, self.assembly_neurons = N, c.assembly_size * c.rows
         self.register_buffer("sizes", torch.tensor([int(n) for n in maps.values()]), persistent=False)
-        self.register_buffer("W", torch.zeros(batch, P, U, N))
         self.register_buffer("strength", torch.ones(batch, P))
         self.register_buffer("usage", torch.zeros(batch, N, dtype=torch.long))
-        # wired[b, m, k]: map m has a pathway to hub neuron k (W[b, m, :, k] has a 1); kept beside W because
-        # reading all of W for it on every bottom-up pass cost as much as the pass itself
-        self.register_buffer("wired", torch.zeros(batch, P, N, dtype=torch.bool))
-        # norm[b, m, k] = W_mk . W_mk, the stored pattern's energy, kept beside W for the same reason
-        self.register_buffer("norm", torch.zeros(batch, P, N))
-        # each stored object's own patterns (its branch on its neurons; W is their union) and their energies
+        # each stored object's own patterns (its branch on its neurons) and their energies
         self.register_buffer("branches", torch.zeros(batch, c.max_assemblies, P, U))
         self.register_buffer("branch_norm", torch.zeros(batch, c.max_assemblies, P))
         self.register_buffer("assemblies", torch.zeros(batch, c.max_assemblies, N, dtype=torch.bool))
         self.register_buffer("n_assemblies", torch.zeros(batch, dtype=torch.long))
+
+    @property
+    def W(self) -> torch.Tensor:
+        """(B, P, U_max, N): W_mk, what map m is wired to on hub neuron k, the union (max) of the branches of the
+        objects k codes for. Computed on demand: nothing reads it on the hot path."""
+        on = self.assemblies.to(self.branches.dtype)
+        return (self.branches[..., None] * on[:, :, None, None, :]).amax(1) if on.shape[1] else \
+            self.branches.new_zeros(on.shape[0], self.branches.shape[2], self.branches.shape[3], on.shape[2])
 
     @property
     def W_back(self) -> torch.Tensor:
@@ -103,12 +113,12 @@ class ObjectHub(nn.Module):
         return self.names.index(name)
 
     def _check(self, acts: torch.Tensor, present: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        B, P, U, _ = self.W.shape
+        B, _, P, U = self.branches.shape
         if acts.shape != (B, P, U):
             raise ValueError(f"acts must be (B, P, U_max) = {(B, P, U)}, got {tuple(acts.shape)}")
         if present.shape != (B, P):
             raise ValueError(f"present must be (B, P) = {(B, P)}, got {tuple(present.shape)}")
-        return acts.to(self.W.dtype), present.bool()
+        return acts.to(self.branches.dtype), present.bool()
 
     # -- activity flows -----------------------------------------------------------------------------------------
     def bottom_up(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
@@ -145,12 +155,13 @@ class ObjectHub(nn.Module):
 
     def top_down(self, hub_state: torch.Tensor) -> torch.Tensor:
         """Hub -> maps (retro-activation). hub_state (B, N) -> (B, P, U_max): r_m = s_m sum_o c_o W_om, over the
-        stored objects o, with c_o = (mean of hub_state over o's assembly) ** assembly_size.
+        stored objects o, with c_o = (mean of hub_state over o's assembly) ** (its size).
 
         A full stored assembly gives s_m on the units it was stored with, in every map (1.0 at full strength); an
-        object that shares one neuron of it, (1/5)^5 = 0.0003 of its own: the power is the branches' conjunction
-        (a branch needs its whole assembly), soft so that a state between two assemblies recalls a blend."""
-        B, P, U, N = self.W.shape
+        object that shares one neuron of a 5-neuron assembly, (1/5)^5 = 0.0003 of its own: the power is the
+        branches' conjunction (a branch needs its whole assembly), soft so that a state between two assemblies
+        recalls a blend."""
+        B, N = self.usage.shape
         if hub_state.shape != (B, N):
             raise ValueError(f"hub_state must be (B, N) = {(B, N)}, got {tuple(hub_state.shape)}")
         return self.strength[:, :, None] * self.recall_patterns(hub_state[:, None])[:, 0]
@@ -158,39 +169,40 @@ class ObjectHub(nn.Module):
     def recall_patterns(self, hub_states: torch.Tensor) -> torch.Tensor:
         """(B, K, N) hub states -> (B, K, P, U_max): `top_down` of each before its strength gate (what the stored
         objects it holds looked like)."""
-        on = self.assemblies.to(self.W.dtype)                                       # (B, A, N)
-        c = torch.einsum("bkn,ban->bka", hub_states.to(self.W.dtype), on) / self.config.assembly_size
-        return torch.einsum("bka,bapu->bkpu", c.clamp(0.0, 1.0) ** self.config.assembly_size, self.branches)
+        on = self.assemblies.to(self.branches.dtype)                                # (B, A, N)
+        c = torch.einsum("bkn,ban->bka", hub_states.to(on.dtype), on) / self.assembly_neurons
+        return torch.einsum("bka,bapu->bkpu", c.clamp(0.0, 1.0) ** self.assembly_neurons, self.branches)
 
     def cross_modal(self, word_acts: torch.Tensor) -> torch.Tensor:
         """Word map -> hub -> every map. word_acts (B, U_word) or (B, U_max) -> (B, P, U_max) retro-activation.
 
         "blue cylinder" activates the word map, the hub's assemblies stored with that name light up, and they
         retro-activate what a blue cylinder looks like in the colour and shape maps (and the rest of the object)."""
-        B, P, U, _ = self.W.shape
+        B, _, P, U = self.branches.shape
         w = self.index(self.config.word_map)
         if word_acts.ndim != 2 or word_acts.shape[0] != B or word_acts.shape[1] > U:
             raise ValueError(f"word_acts must be (B, <= {U}) with B = {B}, got {tuple(word_acts.shape)}")
-        acts = self.W.new_zeros(B, P, U)
+        acts = self.branches.new_zeros(B, P, U)
         acts[:, w, :word_acts.shape[1]] = word_acts.to(acts.dtype)
         present = torch.zeros(B, P, dtype=torch.bool, device=acts.device)
         present[:, w] = True
         return self.top_down(self.bottom_up(acts, present))
 
     def code(self, hub_state: torch.Tensor) -> torch.Tensor:
-        """(B, N) activity -> (B, N) bool: the assembly_size most active neurons (k-winners-take-all), ties to the
-        lower index; neurons with no activity never win, so a silent hub gives an empty code."""
-        k = self.config.assembly_size
-        order = torch.sort(hub_state, dim=-1, descending=True, stable=True).indices[:, :k]
-        out = torch.zeros_like(hub_state, dtype=torch.bool)
-        out.scatter_(1, order, True)
-        return out & (hub_state > 0)
+        """(B, N) activity -> (B, N) bool: the assembly_size most active neurons of each row (k-winners-take-all),
+        ties to the lower index; neurons with no activity never win, so a silent hub gives an empty code."""
+        c = self.config
+        rows = hub_state.reshape(-1, c.rows, c.n_neurons)
+        order = torch.sort(rows, dim=-1, descending=True, stable=True).indices[..., :c.assembly_size]
+        out = torch.zeros_like(rows, dtype=torch.bool)
+        out.scatter_(-1, order, True)
+        return (out & (rows > 0)).reshape(hub_state.shape)
 
     # -- objects ------------------------------------------------------------------------------------------------
     def assembly_activity(self, hub_state: torch.Tensor) -> torch.Tensor:
         """(B, N) -> (B, max_assemblies): mean activity over each stored assembly's neurons (0 for empty slots)."""
         a = self.assemblies.to(hub_state.dtype)
-        return torch.einsum("bn,ban->ba", hub_state, a) / self.config.assembly_size
+        return torch.einsum("bn,ban->ba", hub_state, a) / self.assembly_neurons
 
     def match(self, acts: torch.Tensor, present: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
         """The stored object most like the input: (its assembly's mean activity (B,), its assembly (B, N) bool).
@@ -212,7 +224,7 @@ class ObjectHub(nn.Module):
         winner's codebook vector. Picks the assembly by `_pick` (ties broken at random by an
         optional generator, else to the lower index). Returns the new assemblies (B, N) bool (empty where mask is
         False)."""
-        B, P, U, N = self.W.shape
+        B, A, P, U = self.branches.shape
         graded = winners.is_floating_point()
         if (winners.shape != ((B, P, U) if graded else (B, P))) or present.shape != (B, P) or mask.shape != (B,):
             raise ValueError(f"winners must be (B, P) = {(B, P)} or activities (B, P, U) = {(B, P, U)}, present "
@@ -221,25 +233,21 @@ class ObjectHub(nn.Module):
         present, mask = present.bool(), mask.bool()
         active = present & mask[:, None]
         if graded:
-            pattern = _relative(winners.to(self.W.dtype))
+            pattern = _relative(winners.to(self.branches.dtype))
             pattern = torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
             if (active & (pattern.sum(-1) == 0)).any():
                 raise ValueError("a present map has no activity to store")
         else:
             if (active & ((winners < 0) | (winners >= self.sizes))).any():
                 raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
-            pattern = torch.zeros(B, P, U, dtype=self.W.dtype, device=self.W.device)
+            pattern = torch.zeros(B, P, U, dtype=self.branches.dtype, device=self.branches.device)
             pattern.scatter_(2, winners.clamp(0, U - 1)[:, :, None], 1.0)
         if (mask & (self.n_assemblies >= self.config.max_assemblies)).any():
             raise ValueError(f"object hub full: {self.config.max_assemblies} assemblies stored")
         assembly = self._pick(generator) & mask[:, None]
-        write = active[:, :, None, None] & assembly[:, None, None, :]              # (B, P, 1, N)
-        self.W.copy_(torch.where(write, torch.maximum(self.W, pattern[..., None]), self.W))
-        self.norm.copy_((self.W * self.W).sum(2))
-        self.wired |= active[:, :, None] & assembly[:, None, :]
         self.usage += assembly.long()
         slot = self.n_assemblies.clamp(max=self.config.max_assemblies - 1)
-        rows = torch.arange(B, device=self.W.device)[mask]
+        rows = torch.arange(B, device=self.branches.device)[mask]
         self.assemblies[rows, slot[mask]] = assembly[mask]
         stored = pattern * active[:, :, None]
         self.branches[rows, slot[mask]] = stored[mask]
@@ -255,7 +263,7 @@ class ObjectHub(nn.Module):
         the 11th object the 1st one's exact code.) Remaining ties: random with a generator (drawn for every agent,
         so it advances the same way whatever the mask); without one, the lower index, which keeps an agent's
         choice independent of the other agents in its batch."""
-        B, N, dev = self.usage.shape[0], self.config.n_neurons, self.W.device
+        (B, N), dev, per_row = self.usage.shape, self.usage.device, self.config.n_neurons
         if generator is None:
             jitter = torch.arange(N, device=dev).expand(B, N) * (0.5 / N)
         else:
@@ -264,13 +272,14 @@ class ObjectHub(nn.Module):
         overlap = stored.new_zeros(stored.shape[:2])                     # (B, A) chosen neurons in each
         chosen = torch.zeros(B, N, dtype=torch.bool, device=dev)
         usage = self.usage.to(torch.float64)
-        for _ in range(self.config.assembly_size):
+        for i in range(self.assembly_neurons):
+            row = torch.arange(N, device=dev) // per_row == i // self.config.assembly_size   # rows fill in turn
             worst = (overlap[:, :, None] + stored).amax(1)                 # (B, N)
             shared = torch.einsum("ba,ban->bn", overlap, stored)
-            # lexicographic: worst overlap (<= 5), shared (< 5 * A), usage (<= A), jitter (< 0.5)
+            # lexicographic: worst overlap (<= S, the assembly's size), shared (< S * A), usage (<= A), jitter (< 0.5)
             big = float(stored.shape[1] + 1)
-            score = (worst * 5 * big + shared) * big + usage + jitter.to(torch.float64)
-            k = torch.where(chosen, torch.full_like(score, float("inf")), score).argmin(-1)
+            score = (worst * self.assembly_neurons * big + shared) * big + usage + jitter.to(torch.float64)
+            k = torch.where(chosen | ~row, torch.full_like(score, float("inf")), score).argmin(-1)
             chosen[torch.arange(B, device=dev), k] = True
             overlap += stored[torch.arange(B, device=dev), :, k]
         return chosen

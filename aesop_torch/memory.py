@@ -20,8 +20,9 @@ The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not availab
   episode as the state, a = xi exactly when the stored deviations are orthogonal.
 - Inhibition: each row has its own inhibitory pool, a k-winners-take-all: at most k_r neurons of row r fire, and
   only those predicted above `threshold`, so a row with no support stays empty.
-- Recall: the object row is clamped to the graded cue while the other rows (unknown at first: d = 0) complete the
-  pattern, then it is released and the whole sheet runs freely to a fixed point, so the object row becomes a stored
+- Recall: the object row (or rows, `cue_rows`) is clamped to the graded cue while the other rows (unknown at first:
+  d = 0) complete the pattern, then it is released and the whole sheet runs freely to a fixed point, so the object
+  row becomes a stored
   binary code rather than the graded cue. Strength = cue . xi_obj / |xi_obj|, the mean cue activity on the recalled
   object code. After each retrieval the retrieved state is transiently depressed (anti-Hebbian: its outer product
   and its share of the mean are taken out for the rest of this recall, i.e. a retrieved stored episode is as if
@@ -55,7 +56,15 @@ def _default_row_k() -> tuple[int, ...]:
 class MemoryConfig:
     rows: int = 20                  # paper: 20 events per episode
     cols: int = 50                  # paper: 50 neurons per event (= one hub)
-    object_row: int = 1             # the agent's sheet: row 0 body state before acting, row 1 the object hub
+    # the rows the cue clamps: the object hub's. Row 1 by default (row 0: the body state before acting); the agent's
+    # hub spans more rows (agent.OBJECT_ROWS)
+    cue_rows: tuple = (1,)
+    # the cue enters the sheet relative to its strongest neuron and raised to this power (an expansive
+    # nonlinearity): a neuron the cue drives at half the peak clamps at 0.5^p. 1 = as given. With p != 1, the
+    # neurons of a retrieved episode's cue rows also leave the cue for the rest of that recall (they led to an
+    # episode that is no longer in the weights), so the next retrieval starts from the next strongest. The strength
+    # of a recall is still read with the cue as given.
+    cue_power: float = 1.0
     # active neurons per row (the row's k-WTA): 5 on the object row (hub assembly), 2 elsewhere. Sparse rows give
     # the covariance rule its capacity; 5 on the cue row give the cue enough signal to pull the episode out.
     row_k: tuple = field(default_factory=_default_row_k)
@@ -101,8 +110,10 @@ class MemoryConfig:
             raise ValueError(f"MemoryConfig.row_k has {len(self.row_k)} entries, expected rows={self.rows}")
         if not all(1 <= k < self.cols for k in self.row_k):
             raise ValueError(f"MemoryConfig.row_k must lie in [1, cols={self.cols}), got {self.row_k}")
-        if not 0 <= self.object_row < self.rows:
-            raise ValueError(f"MemoryConfig.object_row={self.object_row} is outside 0..{self.rows - 1}")
+        self.cue_rows = tuple(int(r) for r in self.cue_rows)
+        if not self.cue_rows or len(set(self.cue_rows)) != len(self.cue_rows) or \
+                not all(0 <= r < self.rows for r in self.cue_rows):
+            raise ValueError(f"MemoryConfig.cue_rows must be distinct rows in 0..{self.rows - 1}, got {self.cue_rows}")
         if min(self.max_episodes, self.max_recalls, self.cue_steps, self.free_steps) < 1:
             raise ValueError("MemoryConfig.max_episodes, max_recalls, cue_steps and free_steps must be >= 1")
 
@@ -183,7 +194,7 @@ class EpisodicMemory(nn.Module):
 
         Each row r of an episode holds either nothing or exactly `config.row_k[r]` active neurons (the row's
         inhibitory pool lets no more fire in recall): by default 5 on the object row (a hub assembly) and 2 on every
-        other row (a 2-hot event code); the object row must not be empty, since it is what cues the episode.
+        other row (a 2-hot event code); the cue rows must not all be empty, since they are what cues the episode.
         ValueError otherwise. Raises RuntimeError, storing nothing, when a masked agent's memory is full: nothing is
         ever overwritten."""
         c, B = self.config, self.batch
@@ -203,8 +214,8 @@ class EpisodicMemory(nn.Module):
             b, r = bad.nonzero()[0].tolist()
             raise ValueError(f"episode of agent {b}: row {r} has {int(n[b, r])} active neurons, "
                              f"expected 0 or {int(self.row_k[r])}")
-        if (mask & (n[:, c.object_row] == 0)).any():
-            raise ValueError(f"episode has an empty object row {c.object_row}: it could never be cued")
+        if (mask & (n[:, list(c.cue_rows)].sum(-1) == 0)).any():
+            raise ValueError(f"episode has empty cue rows {c.cue_rows}: it could never be cued")
         full = mask & (self.count >= c.max_episodes)
         if full.any():
             raise RuntimeError(f"episodic memory full: agents {full.nonzero().flatten().tolist()} already hold "
@@ -258,15 +269,19 @@ class EpisodicMemory(nn.Module):
     # -- recall -----------------------------------------------------------------------------------------------
     @torch.no_grad()
     def recall(self, cue: torch.Tensor, max_recalls: int | None = None) -> Recall:
-        """Recall the episodes the graded object-hub cue (B, cols) in [0, 1] points to, strongest first.
+        """Recall the episodes the graded object-hub cue (B, cols * len(cue_rows)) in [0, 1] points to, strongest
+        first (a cue of one row may also be given as (B, cols), of several as (B, len(cue_rows), cols)).
 
         B equals the memory's batch, or the memory has batch 1 and serves B cues (many cues, one memory)."""
         c = self.config
         K = c.max_recalls if max_recalls is None else int(max_recalls)
         if K < 1:
             raise ValueError(f"max_recalls must be >= 1, got {K}")
-        if cue.dim() != 2 or cue.shape[1] != c.cols:
-            raise ValueError(f"cue shape {tuple(cue.shape)}, expected (B, {c.cols})")
+        n_cue = len(c.cue_rows) * c.cols
+        if cue.dim() == 3 and tuple(cue.shape[1:]) == (len(c.cue_rows), c.cols):
+            cue = cue.flatten(1)
+        if cue.dim() != 2 or cue.shape[1] != n_cue:
+            raise ValueError(f"cue shape {tuple(cue.shape)}, expected (B, {n_cue})")
         if cue.shape[0] != self.batch and self.batch != 1:
             raise ValueError(f"cue batch {cue.shape[0]} does not match the memory batch {self.batch}")
         cue = cue.to(self.patterns.device, torch.float32)
@@ -297,12 +312,13 @@ class EpisodicMemory(nn.Module):
         z = net.x.new_zeros(B, K, net.x.shape[2])
         total, n = net.total.clone(), net.n.clone()
         idx = torch.arange(B, device=cue.device)[n[:, 0] > 0]
+        drive = cue.clone()               # the cue less the objects already retrieved (with cue_power != 1)
         for r in range(K):
             if idx.numel() == 0:
                 break
             sub = _Net(net.x, total, n, z[:, :r]).take(idx)
-            state, fixed = self._settle(cue[idx], sub)
-            obj = state[:, c.object_row].float()
+            state, fixed = self._settle(cue[idx] if c.cue_power == 1 else drive[idx], sub)
+            obj = state[:, list(c.cue_rows)].flatten(1).float()
             s = (cue[idx] * obj).sum(1) / obj.sum(1).clamp(min=1.0)
             ok = fixed & (s >= c.min_strength)
             good = idx[ok]
@@ -311,6 +327,7 @@ class EpisodicMemory(nn.Module):
             z[good, r] = state[ok].flatten(1).float()
             total[good] -= z[good, r]
             n[good] -= 1
+            drive[good] *= 1 - obj[ok]
             idx = good[n[good, 0] > 0]
 
     def _settle(self, cue: torch.Tensor, net: _Net) -> tuple[torch.Tensor, torch.Tensor]:
@@ -321,7 +338,11 @@ class EpisodicMemory(nn.Module):
         B, R, C = cue.shape[0], c.rows, c.cols
         p = net.mean().view(B, R, C)
         s = p.clone()                      # unknown rows sit at the mean: no evidence either way
-        s[:, c.object_row] = cue
+        rows = list(c.cue_rows)
+        if c.cue_power != 1:              # relative to the strongest neuron, then the power
+            peak = cue.amax(1, keepdim=True)
+            cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
+        s[:, rows] = cue.view(B, len(rows), C)
         for clamp, steps in ((True, c.cue_steps), (False, c.free_steps)):
             idx, sub = torch.arange(B, device=cue.device), net   # the cues still moving
             for _ in range(steps):
@@ -329,7 +350,7 @@ class EpisodicMemory(nn.Module):
                 new = k_winners(sub.predict((cur - p[idx]).flatten(1), c.zscore).view_as(cur), self.row_k,
                                 c.threshold).to(cur.dtype)
                 if clamp:
-                    new[:, c.object_row] = cue[idx]
+                    new[:, rows] = cue[idx].view(-1, len(rows), C)
                 moving = (new != cur).flatten(1).any(1)
                 s[idx] = new
                 idx, sub = idx[moving], sub.take(moving) if not moving.all() else sub

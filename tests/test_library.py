@@ -12,7 +12,7 @@ from torch import nn
 
 from aesop_torch import (Agent, AgentConfig, CausalRules, EpisodicMemory, ObjectHub, SelfOrganizingMap,
                          SensoryEncoder, SOMConfig)
-from aesop_torch.agent import ROW_OBJECT
+from aesop_torch.agent import OBJECT_ROWS
 
 CYL = [11.5, 6.36, 6.36]
 
@@ -58,8 +58,8 @@ def test_train_and_eval_reach_every_submodule(model):
 def test_to_cpu_and_state_dict_round_trip(model):
     assert model.to("cpu") is model
     state = model.state_dict()
-    for key in ("agent.maps.color.weights", "agent.hub.W", "agent.memory.patterns", "agent.rules.state",
-                "som.weights", "hub.W", "memory.patterns", "rules.state", "head.weight"):
+    for key in ("agent.maps.color.weights", "agent.hub.branches", "agent.memory.patterns", "agent.rules.state",
+                "som.weights", "hub.branches", "memory.patterns", "rules.state", "head.weight"):
         assert key in state, key
     fresh = Container(develop=False)     # maps left at zero: everything must come from the state dict
     assert not torch.equal(fresh.agent.maps["color"].weights, model.agent.maps["color"].weights)
@@ -96,5 +96,5 @@ def test_every_module_can_be_called_in_eval_mode(model):
     expected = model.agent.predict(lifted((0.1, 0.25, 0.85), 420, B=2))   # the same cylinder in blue
     assert expected == pytest.approx([365.0, 365.0], abs=3.0)
     assert model.agent.memory.count.tolist() == [1, 1]
-    assert model.agent.memory.patterns[0, 0, ROW_OBJECT].sum() == 5
+    assert model.agent.memory.patterns[0, 0, list(OBJECT_ROWS)].sum() == 24     # 2 neurons on each of 12 rows
     assert model.head(torch.ones(1, 4)).shape == (1, 1)

@@ -226,7 +226,7 @@ def test_bad_input_is_refused():
     bad[5, 44] = True  # three active neurons on a 2-of-50 row
     with pytest.raises(ValueError, match="row 5 has 3"):
         mem.store(bad[None])
-    with pytest.raises(ValueError, match="object row"):
+    with pytest.raises(ValueError, match="empty cue rows"):
         mem.store(torch.zeros(1, R, C, dtype=torch.bool))
     with pytest.raises(ValueError, match="shape"):
         mem.store(A)

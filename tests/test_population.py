@@ -156,7 +156,7 @@ def test_shared_recall_recalls_each_distinct_memory_and_cue_once():
     for mem in (plain, shared):
         mem.store(torch.stack([sheet(1, cfg), sheet(2, cfg), sheet(1, cfg), sheet(1, cfg)]))
         mem.store(torch.stack([sheet(3, cfg)] * 4), torch.tensor([True, False, True, True]))
-    cue = torch.stack([sheet(c, cfg)[cfg.object_row].float() for c in (1, 2, 1, 2)])
+    cue = torch.stack([sheet(c, cfg)[cfg.cue_rows[0]].float() for c in (1, 2, 1, 2)])
     want, got = plain.recall(cue), shared.recall(cue)
     assert shared.cache.size == 3                  # (A, cue 1) twice, (B, cue 2), (A, cue 2)
     assert torch.equal(got.episodes, want.episodes) and torch.equal(got.valid, want.valid)

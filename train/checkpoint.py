@@ -21,7 +21,7 @@ import tempfile
 from pathlib import Path
 
 FORMAT = "aesop-torch checkpoint"
-VERSION = 1
+VERSION = 2
 # 64 detailed orders of 8 objects is ~6 MB; a file far beyond any real checkpoint is refused before it is read
 MAX_BYTES = 256 * 1024 * 1024
 RUN_KEYS = {"objects": dict, "seed": int, "physics": str, "orders_arg": str}
