@@ -10,6 +10,17 @@ Then correlated, agent-like episodes (the same reach/grasp/drop rows every time)
 with the nominal sparsity offset a_r = k_r / 50, which these episodes defeat. Then recall throughput: many cues
 against one full memory, many agents each with its own small memory, and the classical peer.
 
+Then the agent's own episodes: distinct generated objects (`sim.make_objects`, seeds 1000.., measured and
+outcomes with the simulated robot's noise), each stored as the agent stores it (`Agent.remember`: its object-hub
+assembly on the hub's 12 rows, the body states, the actions, the reward and the fate), and recalled from the
+hub's bottom-up activity for the same object, as the agent cues its memory. Exact = the first (strongest) recall is
+the stored sheet. Beside ours: the same memory with the plain covariance rule (MemoryConfig.zscore=False) and the
+textbook sparse covariance (Tsodyks-Feigelman) network: J = sum (xi - a)(xi - a)^T with each row's nominal
+sparsity a_r = k_r / 50, input J s and the same row-wise k-WTA, fed the same episodes and the same cue (the
+cue to the same power). Capacity = the most episodes (in steps of 10) at which >= 99 % are exact; over 10 sets,
+worst and median. Then the graded recall a prediction needs: for novel objects (the sets' probes), is the first
+recalled episode the stored object nearest to it (the highest hub match)?
+
 Run: .venv/bin/python benches/memory_capacity.py
 """
 
@@ -19,8 +30,15 @@ import time
 
 import torch
 
-from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners
-from record import recorded   # benches/record.py: keeps BENCHMARKS.md current
+import statistics
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig  # noqa: E402
+from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners  # noqa: E402
+from record import recorded   # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 R, C, OBJ, N = 20, 50, 1, 1000
 COUNTS = list(range(25, 501, 25))
@@ -88,6 +106,113 @@ def nominal_exact(x: torch.Tensor, cfg=MemoryConfig(), threshold: float = 0.5) -
         best |= (s.bool() == x).flatten(1).all(1)
         z = torch.where(best[:, None], z, (s - row_k[:, None] / C * s.bool().any(-1, keepdim=True)).flatten(1))
     return best.float().mean().item()
+
+
+def agent_life(seed: int, n: int, n_probe: int = 16):
+    """An agent that has stored n distinct generated objects, their cues (n, N_hub) and its probes' cues."""
+    from sim.make_objects import generate
+    from sim.objects import parse_objects
+    from sim.sensor_model import SensorModel
+    from train.experiment import closed_form_outcomes, stack_measurements
+    objs = parse_objects(generate(seed, n, n_probe, False))
+    out, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
+    cfg = AgentConfig()
+    cfg.memory.max_episodes = cfg.hub.max_assemblies = n
+    agent = Agent(cfg)
+    recs = [out[o.name] for o in objs.train]
+    meas = stack_measurements([r["measurement"] for r in recs])
+    for i, r in enumerate(recs):
+        agent.remember({k: v[i:i + 1] for k, v in meas.items()}, torch.tensor([r["observed_cm3"]]),
+                       torch.tensor([r["goal_before"]]), torch.tensor([r["goal_after"]]), torch.tensor([r["sank"]]))
+    probe = stack_measurements([probes[o.name]["measurement"] for o in objs.probe])
+    def cue(m):   # one object at a time: the hub is one agent's
+        return torch.cat([agent.hub.bottom_up(*agent.activities({k: v[i:i + 1] for k, v in m.items()}))
+                          for i in range(len(m["mass_g"]))])
+    return agent, meas, cue(meas), probe, cue(probe)
+
+
+def first_exact(mem: EpisodicMemory, cues: torch.Tensor, n: int) -> float:
+    """Fraction of the first n stored episodes whose strongest recall, on a memory holding only them, is exact."""
+    sub = EpisodicMemory(mem.config)
+    sub.patterns[0, :n], sub.count[0] = mem.patterns[0, :n], n
+    return (sub.recall(cues[:n], max_recalls=1).episodes[:, 0] == mem.patterns[0, :n]).flatten(1).all(1) \
+        .float().mean().item()
+
+
+def textbook_exact(x: torch.Tensor, cues: torch.Tensor, cfg: MemoryConfig, threshold: float = 0.5) -> float:
+    """Tsodyks-Feigelman: J = sum (xi - a)(xi - a)^T, a_r = k_r / 50 on rows an episode uses, zero diagonal; input
+    h = J s, the same k-WTA and two phases, the cue (relative to its peak, to the same power) on the cue rows."""
+    rows = list(cfg.cue_rows)
+    row_k = torch.tensor(cfg.row_k)
+    act = x.any(-1, keepdim=True)
+    y = (x.float() - (row_k[:, None] / C) * act).flatten(1)
+    diag = (y * y).sum(0)
+    q = (cues / cues.amax(1, keepdim=True).clamp_min(1e-12)) ** cfg.cue_power
+    q = q.view(len(x), len(rows), C)
+    s = torch.zeros(len(x), R, C)
+    s[:, rows] = q
+    for clamp, steps in ((True, cfg.cue_steps), (False, cfg.free_steps)):
+        for _ in range(steps):
+            f = s.flatten(1)
+            new = k_winners(((f @ y.T) @ y - diag * f).view_as(s), row_k, threshold).float()
+            if clamp:
+                new[:, rows] = q
+            if torch.equal(new, s):
+                break
+            s = new
+    return (s.bool() == x).flatten(1).all(1).float().mean().item()
+
+
+def capacity(curve: list[tuple[int, float]]) -> int:
+    """The most episodes before the first count below 99 % exact (0 if the first is)."""
+    best = 0
+    for n, ex in curve:
+        if ex < 0.99:
+            break
+        best = n
+    return best
+
+
+def agent_section(seeds=range(1000, 1010), counts=tuple(range(10, 231, 10))) -> int:
+    print(f"\nthe agent's own episodes ({len(seeds)} generated sets of {counts[-1]} objects, seeds "
+          f"{seeds[0]}-{seeds[-1]}), fraction exact from the object cue at each count: ours / plain covariance / "
+          f"textbook sparse covariance")
+    caps = {"ours": [], "plain": [], "textbook": []}
+    nearest, top3 = [], []
+    for seed in seeds:
+        agent, _, cues, probe, probe_cues = agent_life(seed, counts[-1])
+        mem, x = agent.memory, agent.memory.patterns[0, :counts[-1]]
+        plain = EpisodicMemory(MemoryConfig(**{**vars(mem.config), "zscore": False}))
+        plain.patterns.copy_(mem.patterns)
+        curves = {"ours": [], "plain": [], "textbook": []}
+        for n in counts:
+            curves["ours"].append((n, first_exact(mem, cues, n)))
+            curves["plain"].append((n, first_exact(plain, cues, n)))
+            curves["textbook"].append((n, textbook_exact(x[:n], cues[:n], mem.config)))
+        for k in caps:
+            caps[k].append(capacity(curves[k]))
+        at = {n: (o, p, t) for (n, o), (_, p), (_, t) in zip(curves["ours"], curves["plain"], curves["textbook"])}
+        shown = " ".join(f"{n}:{o:.2f}/{p:.2f}/{t:.2f}" for n, (o, p, t) in at.items() if n in (30, 60, 120, 230))
+        print(f"set {seed}: {shown}  capacity {caps['ours'][-1]} / {caps['plain'][-1]} / {caps['textbook'][-1]}",
+              flush=True)
+        # graded recall for novel objects: nearest stored object (highest hub match) first?
+        rec = mem.recall(probe_cues, max_recalls=3)
+        got = rec.episodes[:, :, list(OBJECT_ROWS)].flatten(2)                       # (Q, 3, N_hub)
+        stored = agent.hub.assemblies[0, :counts[-1]]                                 # (n, N_hub)
+        which = (got[:, :, None, :] == stored[None, None]).all(-1).float().argmax(-1)  # (Q, 3) object index
+        match = torch.cat([agent.hub.object_match(*agent.activities({k: v[i:i + 1] for k, v in probe.items()}))
+                           for i in range(len(probe_cues))])                          # (Q, n) hub match
+        order = match.argsort(1, descending=True)[:, :3]
+        nearest.append((which[:, 0] == order[:, 0]).float().mean().item())
+        top3.append(torch.tensor([len(set(a.tolist()) & set(b.tolist())) / 3 for a, b in zip(which, order)])
+                    .mean().item())
+    for k, name in (("ours", "ours (z-scored covariance)"), ("plain", "plain covariance (zscore=False)"),
+                    ("textbook", "textbook sparse covariance")):
+        print(f"{name:>34}: capacity worst {min(caps[k])}, median {statistics.median(caps[k])}")
+    print(f"novel objects (16 probes per set): first recall is the nearest stored object {statistics.median(nearest):.2f}"
+          f" (median over sets, worst {min(nearest):.2f}); the 3 recalled are the 3 nearest "
+          f"{statistics.median(top3):.2f} (worst {min(top3):.2f})")
+    return min(caps["ours"])
 
 
 def hopfield(xi: torch.Tensor, cues: torch.Tensor, g: torch.Generator, sweeps: int = 30) -> torch.Tensor:
@@ -179,8 +304,9 @@ def main():
     noisy = torch.where(torch.rand(len(cues), N, generator=g) < 0.1, -1.0, 1.0) * xi.repeat(5, 1)
     rate = best_rate(lambda: hopfield(xi, noisy, g), len(cues))
     print(f"classical hopfield (10% flipped cues): {rate:8.0f} recalls/s")
+    agent_capacity = agent_section()
     print(f"\nbench time {time.perf_counter() - t0:.0f} s")
-    print(f"capacity_episodes={capacity}")
+    print(f"capacity_episodes={capacity} agent_capacity_episodes={agent_capacity}")
 
 
 if __name__ == "__main__":
