@@ -316,7 +316,7 @@ class Agent(nn.Module):
         for i, p in enumerate(PROPERTIES):
             lo, hi = self.config.delta_p_band[i]
             if p == "weight":
-                lo, hi = lo + noise, hi + noise
+                hi = hi + noise     # noise widens the unclear band: a change it could fake is not called one
             gap = torch.nan_to_num(gaps[p], nan=0.0)
             changed.append(gap > hi)
             unclear.append((gap > lo) & (gap <= hi))

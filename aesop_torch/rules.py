@@ -11,13 +11,19 @@ and the knowledge is a function of the evidence *set*, so it cannot depend on th
   sees what became of each object (it floats, or it rests on the bottom), and each comparison is evidence in its
   context: both floated, both sank, or one of each (`CONTEXTS`).
 - Elimination (the property changed, the outcome did not): the property does not matter in this context, when it
-  alone changed (besides properties already eliminated there; several changes at once may cancel). Its pathway
-  no longer retro-activates in this context, so later comparisons there no longer see it change.
+  alone changed (besides properties already eliminated there; several changes at once may cancel), unless it also
+  changed alone while the outcome moved (a clean Growth outweighs it: that change may have been too small to
+  show). Its pathway no longer retro-activates in this context, so later comparisons there no longer see it
+  change.
 - Growth (the outcome changed, and so did the properties in its change set): at least one of the changed
   properties matters. One changed property is the paper's clean case; several at once are a confound.
 - Dominant in a context: the properties of the minimal explanations. An explanation is a set of properties, none
   eliminated in the context (nor, unless the context's evidence needs it, in another), that holds a changed
-  property of every contradicted comparison (a hitting set of the change sets); the minimal ones are the smallest.
+  property of every contradicted comparison (a hitting set of the change sets); the minimal ones are those that
+  leave the fewest held comparisons unexplained (a comparison whose change set holds a cause, yet the outcome
+  held), then the smallest: colour changes in every pair of random objects, and only the pairs where it changed
+  and the outcome held tell it from weight. In the mixed context, a property eliminated for floaters and for
+  sinkers alike cannot explain a floater against a sinker.
   A clean Growth forces its property in; a confound is resolved by the rest of the evidence (colour changed
   together with weight is explained by weight once weight explains the other contradictions), and a confound
   nothing resolves makes each candidate dominant.
@@ -144,9 +150,12 @@ class CausalRules(nn.Module):
         fired[dp & dc] = GROWTH
         undecided = (self.state == UNKNOWN) | (self.state == LIKELY_IRRELEVANT)
         fired[~dp & dc & undecided] = UNCERTAINTY
-        changed = (dp.long() * self._weights).sum(-1)                               # the change set's index
-        self.held[rows, ctx, changed] |= ~dc[:, 0] & dp.any(-1)
-        self.contradicted[rows, ctx, changed] |= dc[:, 0] & dp.any(-1)
+        # the evidence keeps the whole change set: what is eliminated is decided from all of it (see _derive), and
+        # a property eliminated now may not be once a clean Growth shows up
+        raw = delta_p & compared[:, None]
+        changed = (raw.long() * self._weights).sum(-1)                              # the change set's index
+        self.held[rows, ctx, changed] |= ~dc[:, 0] & raw.any(-1)
+        self.contradicted[rows, ctx, changed] |= dc[:, 0] & raw.any(-1)
         self.uncertain_count += (~dp & dc).long()
         self._derive()
         if strength is not None:
@@ -162,11 +171,15 @@ class CausalRules(nn.Module):
         # Elimination is clean: a comparison where one property changed (besides ones already eliminated) and the
         # outcome held. When several changed and the outcome held, their effects may cancel (larger but hollower):
         # no verdict. Eliminating one can make another comparison clean, so repeat until nothing changes.
+        # A property that also changed alone while the outcome moved matters (its held comparison was a change too
+        # small to show, or one that cancelled): Growth outweighs Elimination.
         excl = torch.zeros(B, C, dtype=torch.long, device=sets.device)
         for _ in range(P):
             rest = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
             rest.scatter_reduce_(2, sets & ~excl[..., None], self.held, reduce="amax")
-            new = excl | ((rest & single).long() * sets).sum(-1)
+            grew = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
+            grew.scatter_reduce_(2, sets & ~excl[..., None], self.contradicted, reduce="amax")
+            new = excl | ((rest & ~grew & single).long() * sets).sum(-1)
             if torch.equal(new, excl):
                 break
             excl = new
@@ -177,15 +190,24 @@ class CausalRules(nn.Module):
         presumed = excl | anywhere[:, None]
         needs = (self.contradicted & ((sets & ~presumed[..., None]) == 0) & ((sets & ~excl[..., None]) != 0)).any(-1)
         excl = torch.where(needs, excl, presumed)
+        # what matters for neither a floater nor a sinker cannot explain a floater against a sinker
+        both = (self.eliminated[:, FLOATING] & self.eliminated[:, SINKING]).long() @ self._weights
+        excl[:, MIXED] |= both
         # each contradicted change set without its excluded properties; an emptied set is noise nothing explains
         eff = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
         eff.scatter_reduce_(2, sets & ~excl[..., None], self.contradicted, reduce="amax")
         eff[..., 0] = False
-        # an explanation uses no eliminated property and holds a changed property of every contradicted set
+        # an explanation uses no eliminated property and holds a changed property of every contradicted set; of
+        # those, the ones that leave the fewest held comparisons unexplained (a held comparison whose change set
+        # holds a cause should have seen the outcome move, unless effects cancelled), then the smallest
+        held = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
+        held.scatter_reduce_(2, sets & ~excl[..., None], self.held, reduce="amax")
+        held[..., 0] = False
         allowed = (sets & excl[..., None]) == 0                                       # (B, C, n)
         explains = (~eff[:, :, None, :] | self._hits).all(-1) & allowed & (sets > 0)  # (B, C, n)
-        size = torch.where(explains, self._size, torch.full_like(self._size, P + 1))
-        minimal = explains & (size == size.min(-1, keepdim=True).values) & eff.any(-1, keepdim=True)
+        against = (held[:, :, None, :] & self._hits).sum(-1)                          # (B, C, n)
+        key = torch.where(explains, against * (P + 1) + self._size, torch.full_like(against, n * (P + 1)))
+        minimal = explains & (key == key.min(-1, keepdim=True).values) & eff.any(-1, keepdim=True)
         self.dominant.copy_((minimal[..., None] & self._bits).any(2))
         state = torch.full_like(self.state, UNKNOWN)
         state[self.uncertain_count > 0] = LIKELY_IRRELEVANT
