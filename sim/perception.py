@@ -198,7 +198,7 @@ def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
     right = np.array([fwd[1], -fwd[0], 0.0])                   # horizontal, to the camera's right
     roll = math.radians(cam.side_roll_deg)
     up = math.cos(roll) * np.array([0.0, 0.0, 1.0]) + math.sin(roll) * right
-    for widen in (1.0, 2.0):   # an object too big for the usual field (taller than ~14 cm): look again, wider
+    for widen in (1.0, 2.0, 4.0):   # a tall box seen edge-on from the side looks narrow: zoom out   # an object too big for the usual field (taller than ~14 cm): look again, wider
         fov = math.degrees(2 * math.atan(widen * cam.side_field_cm / 200.0 / cam.side_distance))
         view = take_view(client, aim + cam.side_distance * toward, aim, up, fov, cam.width, cam.width,
                          cam.near, cam.far)
@@ -301,13 +301,13 @@ def outline_rect(xy: np.ndarray, px: float) -> tuple[np.ndarray, np.ndarray]:
 def look(client: int, body: int, ws: Workspace, camera: CameraConfig = CameraConfig()) -> Percept:
     """Look at the object standing on the stand: colour, extents, fill, and where its top is."""
     side = side_view(client, body, ws, camera)
-    for widen in (1.0, 2.0):
+    for widen in (1.0, 2.0, 4.0):   # a tall box seen edge-on from the side looks narrow: zoom out
         top = top_view(client, body, side["centre_xy"], side["top_z"], side["width"], camera, widen)
         try:
             mask = _mask(top, body, "top", camera.min_pixels)
             break
         except RuntimeError:
-            if widen > 1.0:
+            if widen == 4.0:
                 raise
     rows, cols = np.nonzero(mask)
     eye_z = top.cam_to_world[2, 3]
