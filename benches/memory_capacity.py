@@ -10,7 +10,7 @@ Then correlated, agent-like episodes (the same reach/grasp/drop rows every time)
 with the nominal sparsity offset a_r = k_r / 50, which these episodes defeat. Then recall throughput: many cues
 against one full memory, many agents each with its own small memory, and the classical peer.
 
-Then the agent's own episodes: distinct generated objects (`sim.make_objects`, seeds 1000.., measured and
+Then the agent's own episodes: distinct generated objects (`sim.make_objects`, seeds 0-9, measured and
 outcomes with the simulated robot's noise), each stored as the agent stores it (`Agent.remember`: its object-hub
 assembly on the hub's 12 rows, the body states, the actions, the reward and the fate), and recalled from the
 hub's bottom-up activity for the same object, as the agent cues its memory. Exact = the first (strongest) recall is
@@ -19,7 +19,8 @@ textbook sparse covariance (Tsodyks-Feigelman) network: J = sum (xi - a)(xi - a)
 sparsity a_r = k_r / 50, input J s and the same row-wise k-WTA, fed the same episodes and the same cue (the
 cue to the same power). Capacity = the most episodes (in steps of 10) at which >= 99 % are exact; over 10 sets,
 worst and median. Then the graded recall a prediction needs: for novel objects (the sets' probes), is the first
-recalled episode the stored object nearest to it (the highest hub match)?
+recalled episode the stored object nearest to it (the highest hub match)? (The agent's sheet layout and the cue's
+power were chosen on sets of seeds 1000 and up; seeds 0-9 were not looked at while choosing them.)
 
 Run: .venv/bin/python benches/memory_capacity.py
 """
@@ -173,7 +174,7 @@ def capacity(curve: list[tuple[int, float]]) -> int:
     return best
 
 
-def agent_section(seeds=range(1000, 1010), counts=tuple(range(10, 231, 10))) -> int:
+def agent_section(seeds=range(10), counts=tuple(range(10, 231, 10))) -> int:
     print(f"\nthe agent's own episodes ({len(seeds)} generated sets of {counts[-1]} objects, seeds "
           f"{seeds[0]}-{seeds[-1]}), fraction exact from the object cue at each count: ours / plain covariance / "
           f"textbook sparse covariance")
