@@ -307,10 +307,11 @@ class World:
     def drive_to(self, q, tol: float, timeout_s: float) -> bool:
         """Motors towards q (POSITION_CONTROL) and step until every joint is within tol, or the timeout."""
         self.robot.drive_arm(q)
-        q = torch.as_tensor(q, dtype=torch.float64)
+        rob, target = self.robot, torch.as_tensor(q, dtype=torch.float64).tolist()
         for _ in range(int(round(timeout_s / self.config.tank.timestep_s))):
             self.step()
-            if (self.robot.arm_q() - q).abs().max() < tol:
+            states = p.getJointStates(rob.body, rob.arm_joints, physicsClientId=self.client)
+            if max(abs(s[0] - t) for s, t in zip(states, target)) < tol:   # in floats: no tensor per step
                 return True
         return False
 
