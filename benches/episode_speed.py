@@ -6,8 +6,8 @@
 2. Per physics step of that episode: the water model (`Water.step`) beside pybullet's own `stepSimulation`.
 3. `python train/run.py` (the default run, `make run`) of this tree beside the same command at --baseline (default
    19ce05e, before the physics was made faster), checked out by `git worktree` into a temporary directory: N runs
-   each, alternately, so both see the same machine; median wall times and their ratio, and whether summary.json
-   is the same byte for byte. Skipped (said so) when git or the commit is not available.
+   each, alternately, so both see the same machine; median wall times and their ratio, the same for the part of
+   the run that simulates (as the run reports it), and whether summary.json is the same byte for byte. Skipped (said so) when git or the commit is not available.
 Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`.
 """
 
@@ -15,6 +15,7 @@ import argparse
 import datetime
 import filecmp
 import os
+import re
 import statistics
 import subprocess
 import sys
@@ -74,12 +75,15 @@ def episode() -> float:
     return out.wall_s
 
 
-def default_run(tree: Path, out: Path) -> float:
+def default_run(tree: Path, out: Path) -> tuple[float, float]:
+    """(wall s, s of its simulations as the run reports them: worker start-up, world builds, 13 simulations)."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.perf_counter()
-    subprocess.run([sys.executable, "train/run.py", "--out", str(out)], cwd=tree, env=env, check=True,
-                   stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    log = subprocess.run([sys.executable, "train/run.py", "--out", str(out)], cwd=tree, env=env, check=True,
+                         capture_output=True, text=True)
+    wall = time.perf_counter() - t0
+    sims = re.search(r"simulating .*: done in ([0-9.]+) s", log.stdout + log.stderr)
+    return wall, float(sims.group(1)) if sims else float("nan")
 
 
 def against(commit: str, runs: int) -> float | None:
@@ -99,12 +103,16 @@ def against(commit: str, runs: int) -> float | None:
                                Path(tmp) / f"{commit}_{runs - 1}" / "summary.json", shallow=False)
         finally:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(base)], capture_output=True)
-    med = {k: statistics.median(v) for k, v in times.items()}
+    med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
+    sims = {k: statistics.median(s for _, s in v) for k, v in times.items()}
     ratio = med["this tree"] / med[commit]
-    print(f"default run (python train/run.py), {runs} runs each, alternately; median wall (all runs):")
+    print(f"default run (python train/run.py), {runs} runs each, alternately; median wall (all runs), and of it the "
+          f"simulations (workers started, worlds built, 13 simulations):")
     for name, v in times.items():
-        print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{x:.2f}' for x in v)})")
-    print(f"  ratio this tree / {commit}: {ratio:.2f}; summary.json {'identical' if same else 'DIFFERS'}")
+        print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{w:.2f}' for w, _ in v)});   simulations "
+              f"{sims[name]:5.2f} s   ({', '.join(f'{x:.2f}' for _, x in v)})")
+    print(f"  ratio this tree / {commit}: {ratio:.2f} (simulations {sims['this tree'] / sims[commit]:.2f}); "
+          f"summary.json {'identical' if same else 'DIFFERS'}")
     return ratio
 
 
