@@ -11,9 +11,12 @@ run: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m pytest
 
+# Every bench in turn (each rewrites its block of BENCHMARKS.md); the first that fails stops the rest, and make fails.
+# MiniSom is the SOM bench's peer, pinned: its defaults (decay schedules) are what that bench matches.
+# episode_speed.py also runs the default experiment at an older commit (git worktree) for its speed ratio.
 bench: $(VENV)/.installed
-	$(PY) -m pip install -q minisom
-	for b in $(filter-out benches/record.py,$(wildcard benches/*.py)); do $(PY) $$b || exit 1; done
+	$(PY) -m pip install -q "minisom==2.3.6"
+	set -e; for b in $(filter-out benches/record.py,$(wildcard benches/*.py)); do echo "== $$b"; $(PY) $$b; done
 
 $(VENV)/.installed: pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)

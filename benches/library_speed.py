@@ -8,6 +8,7 @@ a fresh interpreter (imports included: what a user's script pays once), and of `
 which the checkpoint then overwrote). The last line is `load_s=X predict_ms=Y`. Printed, never asserted.
 """
 
+import datetime
 import statistics
 import subprocess
 import sys
@@ -22,6 +23,7 @@ import torch  # noqa: E402
 from aesop_torch import Agent  # noqa: E402
 from train.experiment import Experiment, load_experiment  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from train.physics import cores  # noqa: E402
 
 CKPT = ROOT / "checkpoints" / "default.pt"
 GREEN_HEAVY_CYLINDER = {"rgb": [0.1, 0.7, 0.2], "extent_cm": [11.5, 6.36, 6.36], "fill": 0.785, "mass_g": 420.0}
@@ -61,6 +63,7 @@ def main():
         e.agent.load_state_dict(state["agent"])
     old_s = median_s(old_load, 5)
 
+    print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}")
     print(f"{CKPT.relative_to(ROOT)}: {len(exp.orders)} orders, {exp.n_episodes} episodes, "
           f"{torch.get_num_threads()} torch thread(s)")
     print(f"load_experiment         {load_s * 1e3:8.1f} ms  (median of 15; peer, maps re-trained then overwritten: "

@@ -173,8 +173,9 @@ def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
 def _rests_on_bottom(world, body: int) -> bool:
     """Did it sink? Seen through the glass by a camera (sim.perception.rests_on_bottom), from the robot's left."""
     tank, (ax, ay) = world.tank, world.away            # world.away: unit vector from the robot to the jar
-    return rests_on_bottom(world.client, body, (tank.jar_body, tank.water_visual), world.config.jar_xy,
-                           tank.bottom_z, (-ay, ax))
+    with world.robot_unseen():
+        return rests_on_bottom(world.client, body, (tank.jar_body, tank.water_visual), world.config.jar_xy,
+                               tank.bottom_z, (-ay, ax))
 
 
 def inspect_object(world, name: str) -> dict:

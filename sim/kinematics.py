@@ -27,7 +27,7 @@ import torch
 import pytorch_kinematics as pk
 from pytorch_kinematics.transforms import rotation_conversions as rc
 
-from sim.robot import ARM_JOINTS, HAND_LINK, ROOT_LINK, RobotConfig, icub_urdf_path
+from sim.robot import ARM_JOINTS, HAND_LINK, ROOT_LINK, RobotConfig, icub_urdf_path, parsed_urdf
 
 
 @dataclass(frozen=True)
@@ -86,13 +86,24 @@ def wxyz_to_xyzw(q: torch.Tensor) -> torch.Tensor:
     return torch.cat([q[..., 1:], q[..., :1]], dim=-1)
 
 
-def _kinematic_urdf(path: Path) -> str:
-    """Links and joints only: pk's parser prints a line per <sensor>/<gazebo> tag, and they carry no kinematics."""
-    root = ET.parse(path).getroot()
-    for el in list(root):
-        if el.tag not in ("link", "joint"):
-            root.remove(el)
-    return ET.tostring(root, encoding="unicode")
+def _kinematic_urdf(path: Path, end_link: str) -> str:
+    """The links and joints from ROOT_LINK to end_link, nothing else: pk builds (and deep-copies) every frame it is
+    given, ~0.5 s for the whole iCub against ~0.02 s for the chain, and its parser prints a line per <sensor> /
+    <gazebo> tag. The chain's frames are the same either way. (Without a path to end_link, every link and joint:
+    pk then says what is missing.)"""
+    root = parsed_urdf(path)
+    joints = root.findall("joint")
+    parent = {j.find("child").get("link"): j for j in joints}
+    keep, link = [], end_link
+    while link != ROOT_LINK and link in parent:
+        keep.append(parent[link])
+        link = parent[link].find("parent").get("link")
+    names = {ROOT_LINK, end_link} | {j.find("child").get("link") for j in keep}
+    if link != ROOT_LINK:
+        keep, names = joints, {el.get("name") for el in root.findall("link")}
+    parts = [el for el in root.findall("link") if el.get("name") in names] + keep[::-1]
+    return f'<robot name="{root.get("name")}">' + "".join(ET.tostring(el, encoding="unicode") for el in parts) + \
+        "</robot>"
 
 
 def _check_batch(x: torch.Tensor, width: int, what: str) -> None:
@@ -108,7 +119,7 @@ class ArmKinematics:
     def __init__(self, urdf_path: str | Path | None = None, dtype: torch.dtype = torch.float64,
                  device: str | torch.device = "cpu", config: IKConfig | None = None, end_link: str = HAND_LINK):
         self.dtype, self.device, self.config = dtype, torch.device(device), config or IKConfig()
-        text = _kinematic_urdf(Path(urdf_path) if urdf_path else icub_urdf_path())
+        text = _kinematic_urdf(Path(urdf_path) if urdf_path else icub_urdf_path(), end_link)
         self.chain = pk.build_serial_chain_from_urdf(text, end_link, ROOT_LINK).to(dtype=dtype, device=self.device)
         names = tuple(self.chain.get_joint_parameter_names())
         if names != ARM_JOINTS:

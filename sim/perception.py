@@ -7,7 +7,8 @@ Nothing here reads the engine's answers about the object (no AABB, collision sha
 images (colour, depth buffer, segmentation mask) and what the robot knows of its own workspace, where its stand is
 and how high its top is (`Workspace`). The segmentation mask stands in for figure-ground segmentation.
 
-Two views (`CameraConfig`), each one TinyRenderer image (~35 ms each, mostly the iCub's meshes):
+Two views (`CameraConfig`), each one TinyRenderer image (~20 ms each; the world hides the robot from them,
+`World.robot_unseen`, whose meshes would triple that):
 1. a side view from the robot's right (-y), 10 degrees above the horizontal, aimed at the stand (rolled 15 degrees
    about its axis, so upright edges cross the pixel grid): a fixed glance that finds the object (where it is, how
    wide, how tall) and gives its side profile;
@@ -48,7 +49,7 @@ MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
 
 @dataclass(frozen=True)
 class CameraConfig:
-    """The two views. Image sizes barely change the cost (a render is ~35 ms whatever its size: the iCub's meshes)
+    """The two views. Image sizes barely change the cost (a render is ~20 ms whatever its size: the scene's meshes)
     but set the precision: at 256 px the side view sees 0.7 mm per pixel, the zoomed top view 0.1-0.6 mm."""
     width: int = 256                  # both views are square, this many pixels a side
     near: float = 0.05                # near/far of the depth buffer: 30x apart keeps it fine (~1e-7 m in float32)

@@ -25,6 +25,7 @@ import os
 import sys
 import time
 import zlib
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -117,8 +118,7 @@ class World:
         self.kin = ArmKinematics(config=c.ik)
         self.steps = 0
         self.recorder = None
-        self._fresh = False       # True while the scene is as built: reset() then need not rebuild it
-        self.reset()
+        self._build()
 
     # -- scene -------------------------------------------------------------------------------------------------
     def _build(self):
@@ -165,7 +165,49 @@ class World:
         self.tank.sync_visuals()
         if self.gui:
             p.resetDebugVisualizerCamera(1.1, 130, -25, [0.2, -0.05, 0.55], physicsClientId=cl)
-        self._fresh = True
+        # the robot's colour per visual shape, read once: changeVisualShape overwrites what getVisualShapeData
+        # reports for every shape of a link, so after a hide it no longer tells the colours apart
+        self._robot_colours, seen = [], {}
+        for shape in p.getVisualShapeData(self.robot.body, physicsClientId=cl):
+            link = shape[1]
+            seen[link] = seen.get(link, -1) + 1
+            self._robot_colours.append((link, seen[link], shape[7]))
+        self._scene = set(self._body_ids())
+        self._ungrasped = set()   # bodies whose collisions with the robot grasp() switched off
+        self._saved = p.saveState(physicsClientId=cl)
+
+    def _body_ids(self) -> list[int]:
+        cl = self.client
+        return [p.getBodyUniqueId(i, physicsClientId=cl) for i in range(p.getNumBodies(physicsClientId=cl))]
+
+    def _restore(self):
+        """The scene as `_build` left it, without rebuilding it (loading the robot is most of a build's ~0.3 s):
+        every constraint and body added since removed, newest first, the saved state restored (p.restoreState:
+        poses, velocities, contacts), and what it does not hold set again as `_build` set it (the arm's motors,
+        the water's level). tests/test_world.py checks that an episode then ends bit for bit as in a new world."""
+        cl = self.client
+        for i in reversed(range(p.getNumConstraints(physicsClientId=cl))):
+            p.removeConstraint(p.getConstraintUniqueId(i, physicsClientId=cl), physicsClientId=cl)
+        self.held = None
+        for bid in sorted(set(self._body_ids()) - self._scene, reverse=True):
+            self._remove(bid)
+        self.body = None
+        p.restoreState(self._saved, physicsClientId=cl)
+        self.robot.set_arm(self.home_q)
+        self.tank.water.reset_level()
+        self.tank.water.update_level()
+        self.tank.sync_visuals()
+
+    def _remove(self, bid: int):
+        """Take a body out of the scene and the water. pybullet keeps collision filters by body id and gives the
+        next new body this one's id, so the robot's collisions with it, switched off by `grasp`, go back on."""
+        cl, rob = self.client, self.robot.body
+        if bid in self._ungrasped:
+            self._ungrasped.discard(bid)
+            for link in range(-1, p.getNumJoints(rob, physicsClientId=cl)):
+                p.setCollisionFilterPair(rob, bid, link, -1, 1, physicsClientId=cl)
+        self.tank.water.remove_body(bid)
+        p.removeBody(bid, physicsClientId=cl)
 
     def close(self):
         if self.client is not None and p.isConnected(self.client):
@@ -197,13 +239,12 @@ class World:
     def reset(self, name: str | None = None):
         """Water back to its start level, the ball back against the far wall, the arm home, no object out.
 
-        The scene is rebuilt from scratch (p.resetSimulation, ~0.3 s): pybullet's broadphase and contact caches
-        remember earlier episodes, and an outcome must not depend on which objects went before (presentation
-        orders, --resume). With `name`, the sensor noise is re-seeded from (seed, name) for the same reason: each
-        object's episode is then a function of the seed and the object alone, bit for bit.
+        The scene goes back to the state saved when it was built (`_restore`, a few ms), so an outcome does not
+        depend on which objects went before (presentation orders, --resume). With `name`, the sensor noise is
+        re-seeded from (seed, name) for the same reason: each object's episode is then a function of the seed and
+        the object alone, bit for bit.
         """
-        if not self._fresh:
-            self._build()
+        self._restore()
         if name is not None:
             self.rng = np.random.default_rng([self.seed, zlib.crc32(name.encode())])
 
@@ -217,7 +258,6 @@ class World:
         its lowest point on the stand's top, centred on the stand's axis."""
         if self.body is not None:
             raise RuntimeError("an object is already out; reset() first")
-        self._fresh = False
         rot = np.asarray(p.getMatrixFromQuaternion(list(orientation)), dtype=float).reshape(3, 3)
         half_z = 0.5 * spec.size_xyz_cm * CM @ np.abs(rot[2])   # the rotated box's half height
         if spec.shape == "sphere":
@@ -231,13 +271,11 @@ class World:
         if self.held is not None:
             self.release()
         if self.body is not None:
-            self.tank.water.remove_body(self.body)
-            p.removeBody(self.body, physicsClientId=self.client)
+            self._remove(self.body)
             self.body = None
 
     # -- stepping ----------------------------------------------------------------------------------------------
     def _after_step(self, _i=None):
-        self._fresh = False
         self.steps += 1
         if self.recorder is not None:
             self.recorder.on_step(self)
@@ -269,10 +307,11 @@ class World:
     def drive_to(self, q, tol: float, timeout_s: float) -> bool:
         """Motors towards q (POSITION_CONTROL) and step until every joint is within tol, or the timeout."""
         self.robot.drive_arm(q)
-        q = torch.as_tensor(q, dtype=torch.float64)
+        rob, target = self.robot, torch.as_tensor(q, dtype=torch.float64).tolist()
         for _ in range(int(round(timeout_s / self.config.tank.timestep_s))):
             self.step()
-            if (self.robot.arm_q() - q).abs().max() < tol:
+            states = p.getJointStates(rob.body, rob.arm_joints, physicsClientId=self.client)
+            if max(abs(s[0] - t) for s, t in zip(states, target)) < tol:   # in floats: no tensor per step
                 return True
         return False
 
@@ -326,6 +365,7 @@ class World:
         rel_pos, rel_orn = p.multiplyTransforms(inv_pos, inv_orn, bpos, born)
         for link in range(-1, p.getNumJoints(rob.body, physicsClientId=cl)):
             p.setCollisionFilterPair(rob.body, body, link, -1, 0, physicsClientId=cl)
+        self._ungrasped.add(body)
         cid = p.createConstraint(rob.body, rob.hand_link, body, -1, p.JOINT_FIXED, [0, 0, 0], rel_pos, [0, 0, 0],
                                  rel_orn, [0, 0, 0, 1], physicsClientId=cl)
         p.changeConstraint(cid, maxForce=200.0, physicsClientId=cl)  # N: 20x the heaviest allowed object
@@ -365,10 +405,25 @@ class World:
         """What the robot knows of its stand (where it is, how high its top is): not of the object on it."""
         return Workspace(tuple(self.config.stand_xy), float(self.stand_top))
 
+    @contextmanager
+    def robot_unseen(self):
+        """The robot invisible to the cameras inside the block (TinyRenderer skips a shape of alpha 0), then as it
+        was. Its meshes are most of what a render costs, and the perception cameras look at the stand and into the
+        jar from where the robot is not in the way (sim/perception.py): the pixels they measure are the same."""
+        cl, body = self.client, self.robot.body
+        for link in sorted({link for link, _, _ in self._robot_colours}):
+            p.changeVisualShape(body, link, rgbaColor=[0, 0, 0, 0], physicsClientId=cl)
+        try:
+            yield
+        finally:
+            for link, index, rgba in self._robot_colours:
+                p.changeVisualShape(body, link, shapeIndex=index, rgbaColor=list(rgba), physicsClientId=cl)
+
     def look(self, body: int) -> Percept:
         """Look at the object on the stand (two camera images, sim/perception.py): its measurement without the
         mass, and where its top is, which is where the hand goes to take it."""
-        return look(self.client, body, self.workspace, self.config.camera)
+        with self.robot_unseen():
+            return look(self.client, body, self.workspace, self.config.camera)
 
     def perceive(self, body: int, mass_g: float) -> dict:
         return {**self.look(body).measurement, "mass_g": float(mass_g)}

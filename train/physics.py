@@ -1,9 +1,16 @@
 """The runner's access to the simulated world: drops and inspections, spread over worker processes.
 
-Every drop and every inspection rebuilds the scene from scratch and seeds its sensor noise from (seed, object name)
-(sim/world.py), so an object's outcome is the same bit for bit whichever process simulates it and whatever it
-simulated before. That makes the physics embarrassingly parallel: the profile of a default run showed the drops
-and inspections (13 independent simulations) taking 9 of its 12 s, so they run on every core at once.
+Every drop and every inspection starts from the scene as built (sim/world.py restores it) and seeds its sensor noise
+from (seed, object name), so an object's outcome is the same bit for bit whichever process simulates it and whatever
+it simulated before. That makes the physics embarrassingly parallel: the profile of a default run showed the drops
+and inspections (13 independent simulations) taking 9 of its 12 s, so they run on every core at once. Each worker
+builds its world once.
+
+On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
+pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has torch
+already. It is safe here: the runner holds no pybullet client (a GUI simulates in-process), and a worker's torch runs
+on one thread (`_init`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy
+on two threads and a tensorboard writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
 Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
 imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
@@ -14,14 +21,16 @@ from __future__ import annotations
 import multiprocessing as mp
 import os
 import signal
+import sys
 import threading
 
 _WORLD = None  # one World per worker process
+START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
 
 
 def _init(objects, seed: int) -> None:
     global _WORLD
-    signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since exec; kept should a start method differ
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since the fork (or exec)
     import torch
 
     torch.set_num_threads(1)  # one process per core
@@ -66,9 +75,9 @@ class Physics:
                     progress(j)
             return results
         if self._pool is None:
-            ctx = mp.get_context("spawn")  # a fresh interpreter: no pybullet client or torch threads inherited
+            ctx = mp.get_context(START_METHOD)
             main = threading.current_thread() is threading.main_thread()   # only it may set handlers
-            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited through exec
+            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
             try:
                 self._pool = ctx.Pool(min(self.workers, len(jobs)), initializer=_init,
                                       initargs=(self.objects, self.seed))
