@@ -190,9 +190,15 @@ def prepare(args, objects, n_orders: int):
     """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
     checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
     checked."""
+    import torch
+
     from train.experiment import Experiment, draw_orders
     from train.summary import FULL_RUNS
 
+    # small tensors (at most 64 agents in detail) run faster on one thread than on two fighting each other, and so
+    # does building the experiment (its maps' training took 6.9 s on 2 threads of a busy machine, 0.3 s on 1); a
+    # population of many orders sets its own (train/population.py)
+    torch.set_num_threads(1)
     if n_orders > FULL_RUNS and args.physics == "per-episode":
         raise UsageError(f"--physics per-episode with {n_orders} orders would simulate "
                          f"{n_orders * len(objects.train)} drops; more than {FULL_RUNS} orders run as a population "
@@ -343,9 +349,6 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
     from train.tensorboard_log import OrderLog
-    # small tensors (a few agents) run faster on one thread than on two fighting each other; a large population's
-    # big tensors use both cores
-    torch.set_num_threads(1 if len(exp.orders) <= 256 else 2)
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
 
