@@ -15,6 +15,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
 from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
 
 from aesop_torch.rules import PROPERTIES, STATES  # noqa: E402
 
@@ -58,7 +59,10 @@ def figure2(runs: list[list[dict]]):
                       color="white" if code >= 2 else "black")
     left.set_yticks(range(n_rows), labels, fontsize=6)
     left.tick_params(axis="y", length=0)
-    left.set_xticks(range(1, n_eps + 1))
+    if n_eps <= 30:   # every episode; a long life gets matplotlib's few round ticks
+        left.set_xticks(range(1, n_eps + 1))
+    else:
+        left.xaxis.set_major_locator(MaxNLocator(integer=True))
     left.set_xlabel("episode (objects in each order's own sequence)")
     more = f" (first {MAX_CURVES} of {len(runs)} orders)" if len(runs) > MAX_CURVES else ""
     left.set_title("causal knowledge per property after each episode" + more, fontsize=9)
@@ -73,6 +77,8 @@ def figure2(runs: list[list[dict]]):
     right.set_title("prediction error vs Archimedes (probe objects)" + more, fontsize=9)
     right.set_xlabel("episode")
     right.set_ylabel("median |predicted - Archimedes| / Archimedes (%)")
+    if n_eps > 30:    # a long life: the tail matters, where the error is a few percent
+        right.set_yscale("log")
     right.legend(fontsize=7)
     fig.tight_layout()
     return fig
