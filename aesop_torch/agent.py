@@ -34,8 +34,9 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
-from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
-from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
+from .encoders import (PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder, default_map_configs,
+                       encode_words, train_property_maps, word_activity)
+from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode, _relative
 from .memory import EpisodicMemory, MemoryConfig
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
                     context_of, contradiction, outcome_unclear)
@@ -53,6 +54,9 @@ def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
     """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS)."""
     return torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
                       for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
+
+
+NAME_SAME = 0.999   # name_match of an object's own name is 1 up to float rounding; one word changed gives 0.67
 
 
 @dataclass
@@ -91,6 +95,16 @@ class AgentConfig:
     # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
     # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
     fate_ridge: float = 1e-2
+    # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
+    # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
+    # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
+    # alike). True: the word map drives the cue like a property map (at its pathway strength, 1).
+    names_in_cue: bool = False
+    # `imagine`: the words must match a stored name at least this well (cosine of the word map's patterns, read
+    # over the assembly's neurons: an object's own name gives 1, a name with one more word than was said 0.82 (2 of
+    # 3 words), one with a word in place of another 0.67) to be taken as naming it; below, the answer is "no object
+    # I know", not a guess. So "blue cylinder" names the blue heavy cylinder and "light blue cube" no yellow cube.
+    imagine_floor: float = 0.75
     seed: int = 0
 
     def __post_init__(self):
@@ -119,6 +133,17 @@ class Anticipation:
     values: dict             # map name -> (B, dim) decoded bottom-up values
     recalled_values: dict    # map name -> (B, K, dim) values each recalled episode retro-activates
     fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
+
+
+@dataclass
+class Imagination:
+    """What words retro-activate, with no object in view (leading dim B)."""
+    known: torch.Tensor      # (B,) bool: the words name a stored object (score >= AgentConfig.imagine_floor)
+    score: torch.Tensor      # (B,) how strongly the words light up the best stored assembly (1: its own name)
+    runner_up: torch.Tensor  # (B,) the next best assembly's score (0 if none): how ambiguous the words are
+    acts: torch.Tensor       # (B, P_all, U) the map activity the best assembly retro-activates
+    values: dict             # property -> (B, dim) population-decoded values of that activity
+    anticipation: "Anticipation"  # the imagined object anticipated from memory (expected NaN where not known)
 
 
 @dataclass
@@ -168,10 +193,21 @@ class Agent(nn.Module):
         present = torch.zeros(B, len(self.maps), dtype=torch.bool)
         for i, (name, som) in enumerate(self.maps.items()):
             if name in inputs:
-                a = som.activity(inputs[name])
-                acts[:, i, :a.shape[-1]] = a
-                present[:, i] = True
+                a = word_activity(som, inputs[name]) if name == WORD_MAP else som.activity(inputs[name])
+                # a name with no word the agent knows is no input (its map would still have a nearest unit)
+                has = inputs[name].abs().sum(-1) > 0 if name == WORD_MAP else torch.ones(B, dtype=torch.bool)
+                acts[:, i, :a.shape[-1]] = a * has[:, None]
+                present[:, i] = has
         return acts, present
+
+    def cue_present(self, present: torch.Tensor) -> torch.Tensor:
+        """The maps that drive the bottom-up cue of an object in view: all with input, the word map only if
+        AgentConfig.names_in_cue (names are stored with the object either way)."""
+        if self.config.names_in_cue or WORD_MAP not in self.maps:
+            return present
+        out = present.clone()
+        out[:, list(self.maps).index(WORD_MAP)] = False
+        return out
 
     def decode(self, acts: torch.Tensor) -> dict:
         """(..., P_all, U) map activities -> {property: (..., dim) population-decoded value in the map's input}."""
@@ -194,8 +230,12 @@ class Agent(nn.Module):
     @torch.no_grad()
     def anticipate(self, measurement: dict) -> "Anticipation":
         """Perceive, recall and read out the expected displacement; learns nothing."""
-        acts, present = self.activities(measurement)
-        recall = self.memory.recall(self.hub.bottom_up(acts, present))
+        return self.anticipate_acts(*self.activities(measurement))
+
+    @torch.no_grad()
+    def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor) -> "Anticipation":
+        """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all)."""
+        recall = self.memory.recall(self.hub.bottom_up(acts, self.cue_present(present)))
         rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
         values = self.decode(acts)
@@ -276,6 +316,50 @@ class Agent(nn.Module):
             beta = beta + torch.linalg.solve(hess, grad[..., None])[..., 0]
         return torch.sigmoid(beta[:, 0])
 
+    def name_match(self, word_acts: torch.Tensor) -> torch.Tensor:
+        """(B, U_word) word map activity -> (B, max_assemblies) how well it matches the name stored with each
+        assembly: per hub neuron the cosine of the activity (relative to its peak) and the word pattern stored onto
+        it, averaged over the assembly's neurons; 0 for an assembly stored without a name."""
+        w = list(self.maps).index(WORD_MAP)
+        word = _relative(word_acts)
+        stored = self.hub.W[:, w, :word.shape[-1]]                                          # (B, U_word, N)
+        cos = torch.einsum("bu,bun->bn", word, stored) / (word.norm(dim=-1, keepdim=True) *
+                                                          self.hub.norm[:, w].sqrt()).clamp_min(1e-12)
+        return self.hub.assembly_activity(cos * self.hub.wired[:, w])
+
+    @torch.no_grad()
+    def imagine(self, words) -> Imagination:
+        """Words, no object in view: the word map's activity drives the hub (bottom-up, the word pathway alone), the
+        stored assembly it lights up most retro-activates the property maps (W', at full strength: what that object
+        looked and felt like), and that imagined object is anticipated from memory like a seen one.
+
+        words: a phrase, or B phrases. ValueError (one line) for a word outside the vocabulary or no word at all:
+        an unknown word is not guessed at. Words that name no stored object come back with known False."""
+        B = self.batch
+        phrases = [words] * B if isinstance(words, str) else list(words)
+        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
+            raise ValueError(f"words must be a phrase or {B} phrases")
+        for phrase in phrases:
+            tokens = phrase.lower().replace("_", " ").split()
+            unknown = [w for w in tokens if w not in VOCABULARY]
+            if unknown or not tokens:
+                raise ValueError(("no words given" if not tokens else f"unknown word(s) {', '.join(map(repr, unknown))}")
+                                 + f"; the words I know: {' '.join(VOCABULARY)}")
+        w = list(self.maps).index(WORD_MAP)
+        score = self.name_match(word_activity(self.maps[WORD_MAP], encode_words(phrases)))   # (B, max_assemblies)
+        top = score.topk(min(2, score.shape[1]), dim=-1)
+        best = top.values[:, 0]
+        runner_up = top.values[:, 1] if score.shape[1] > 1 else torch.zeros_like(best)
+        known = best >= self.config.imagine_floor
+        assembly = self.hub.assemblies[torch.arange(B), top.indices[:, 0]] & known[:, None]
+        retro = self.retro_activate(assembly[:, None])[:, 0]                           # (B, P_all, U)
+        retro[:, w] = 0.0
+        seen = retro.sum(-1) > 0
+        seen[:, w] = False
+        a = self.anticipate_acts(retro, seen)
+        a.expected = torch.where(known, a.expected, torch.full_like(a.expected, float("nan")))
+        return Imagination(known, best, runner_up, retro, self.decode(retro), a)
+
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
         return self.anticipate(measurement).expected
@@ -349,11 +433,29 @@ class Agent(nn.Module):
         encoded = learn & ~same
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
+        self._name(a.acts, a.present, learn & ~encoded)
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
+
+    def _name(self, acts, present, mask) -> None:
+        """A named object whose episode was not encoded (nothing new to learn) still gets its assembly, with its
+        name, if the hub does not know it yet: the teacher named it, and `imagine` must find it by that name."""
+        if WORD_MAP not in self.maps:
+            return
+        w = list(self.maps).index(WORD_MAP)
+        named = mask & present[:, w]
+        if named.any():
+            # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
+            # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
+            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
+            best, i = score.max(-1)
+            same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
+            new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
+            if new.any():
+                self.hub.allocate(acts, present, new)
 
     def _encode(self, acts, present, observed, goal_before, goal_after, fate, mask) -> None:
         """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet."""
-        best, assembly = self.hub.match(acts, present)
+        best, assembly = self.hub.match(acts, self.cue_present(present))
         new = mask & (best < self.config.hub.match_threshold)
         fresh = self.hub.allocate(acts, present, new)
         assembly = torch.where(new[:, None], fresh, assembly)

@@ -116,6 +116,9 @@ class Experiment:
     records: list[list[dict]] = field(default_factory=list)
     outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
     probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
+    # per order, the goal trials' records (train/trials.py), played after the exploration; not checkpointed: they
+    # are a function of the final state
+    trials: list = field(default_factory=list)
     # False: the agents' maps are not trained here because a state dict is about to bring them (from_state_dict)
     develop: InitVar[bool] = True
 
@@ -142,6 +145,7 @@ class Experiment:
         names = [self.train_names[o[self.t]] for o in self.orders]
         outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
         meas = stack_measurements([o["measurement"] for o in outs])
+        meas["words"] = names          # the teacher names each object as it is presented (bound in the hub)
         observed = torch.tensor([o["observed_cm3"] for o in outs])
         before = torch.tensor([o["goal_before"] for o in outs])
         after = torch.tensor([o["goal_after"] for o in outs])
