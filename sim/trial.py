@@ -172,10 +172,12 @@ class PhysicsTrials:
     def outcome(self, sequence: tuple):
         """The outcome (sim.episode.EpisodeOutcome) of the last drop of `sequence`, the earlier ones before it."""
         sequence = tuple(sequence)
+        if self.world is None:
+            from sim.world import World
+            self.world = World(self.objects, seed=self.seed)
+        if not sequence:
+            return None
         if sequence not in self.cache:
-            if self.world is None:
-                from sim.world import World
-                self.world = World(self.objects, seed=self.seed)
             outs = simulate_sequence(self.world, sequence, self.record or None)
             for k in range(1, len(sequence) + 1):
                 self.cache.setdefault(sequence[:k], outs[k - 1])

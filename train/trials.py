@@ -186,3 +186,46 @@ def _with_names(ms: list[dict], names: list[str], on: bool) -> dict:
     if on:
         out["words"] = list(names)
     return out
+
+
+def outcome_dict(outcome) -> dict:
+    """The part of a world EpisodeOutcome a trial keeps."""
+    from train.experiment import plain_measurement
+    return {"observed_cm3": float(outcome.observed_cm3), "goal_before": bool(outcome.goal_reachable_before),
+            "goal_after": bool(outcome.goal_reached_after), "sank": bool(outcome.sank),
+            "measurement": plain_measurement(outcome.measurement)}
+
+
+def play_trials(exp, objects, world_trials=None, progress=None) -> list[list[dict]]:
+    """The runner's goal trials: every trial of the objects file with every order's agent, in the simulated world
+    (sim.trial.PhysicsTrials: each drop into the jar as earlier drops left it, the IK reach test after each). A
+    candidate is lifted and weighed as in the exploration (its measurement from there, or inspected here for an
+    object only trials use). world_trials: a PhysicsTrials (default: one for the file and the run's seed)."""
+    from sim.objects import archimedes_cm3
+    from sim.trial import PhysicsTrials
+    from train.experiment import plain_measurement
+
+    own = world_trials is None
+    world = PhysicsTrials(objects, seed=exp.seed) if own else world_trials
+    try:
+        measurements = {n: o["measurement"] for n, o in exp.outcomes.items()}
+        measurements.update({n: p["measurement"] for n, p in exp.probes.items()})
+        for stand in objects.trials:
+            for n in stand:
+                if n not in measurements:
+                    if world.world is None:
+                        world.outcome(())   # builds the world
+                    measurements[n] = plain_measurement(world.world.inspect(n))
+        archimedes = {n: archimedes_cm3(objects.get(n), objects.jar) for stand in objects.trials for n in stand}
+        agent = roomy_copy(exp.agent, sum(len(s) for s in objects.trials))
+
+        def drop(b, sequence):
+            out = outcome_dict(world.outcome(sequence))
+            if progress is not None:
+                progress(sequence)
+            return out
+
+        return run_trials(agent, objects.trials, measurements, drop, objects.jar, archimedes, seed=exp.seed)
+    finally:
+        if own:
+            world.close()
