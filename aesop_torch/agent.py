@@ -56,7 +56,7 @@ def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
                       for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
 
 
-NAME_SAME = 0.999   # name_match of an object's own name is 1 up to float rounding; one word changed gives 0.67
+NAME_SAME = 0.99   # name_match of an object's own name is 1 up to float rounding; one word of 6 changed gives 0.83
 
 
 @dataclass
@@ -322,6 +322,7 @@ class Agent(nn.Module):
         it, averaged over the assembly's neurons; 0 for an assembly stored without a name."""
         w = list(self.maps).index(WORD_MAP)
         word = _relative(word_acts)
+        word = torch.where(word >= self.config.hub.store_floor, word, torch.zeros_like(word))   # as stored
         stored = self.hub.W[:, w, :word.shape[-1]]                                          # (B, U_word, N)
         cos = torch.einsum("bu,bun->bn", word, stored) / (word.norm(dim=-1, keepdim=True) *
                                                           self.hub.norm[:, w].sqrt()).clamp_min(1e-12)
@@ -433,12 +434,15 @@ class Agent(nn.Module):
         encoded = learn & ~same
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
-        self._name(a.acts, a.present, learn & ~encoded)
+        self._name(a.acts, a.present, learn)
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
 
     def _name(self, acts, present, mask) -> None:
-        """A named object whose episode was not encoded (nothing new to learn) still gets its assembly, with its
-        name, if the hub does not know it yet: the teacher named it, and `imagine` must find it by that name."""
+        """A named object the hub does not know by that name gets an assembly of its own, with its name: one whose
+        episode was not encoded (nothing new to learn), or was stored on the assembly of a look-alike of another
+        name (`_encode` reuses an assembly the object matches, and once colour is irrelevant a blue cylinder
+        matches a red one). The teacher named it, and `imagine` must find it by that name; recall is unchanged,
+        since the cue of an object in view leaves names out."""
         if WORD_MAP not in self.maps:
             return
         w = list(self.maps).index(WORD_MAP)

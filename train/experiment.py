@@ -222,3 +222,51 @@ def load_experiment(path) -> Experiment:
         return Experiment.from_state_dict(load(path)["experiment"])
     finally:
         torch.set_num_threads(threads)
+
+
+def _imagined(exp_agent, im, b: int) -> dict:
+    """Agent b's Imagination as plain values: per property the decoded value and the map unit most active."""
+    import math as _m
+
+    from aesop_torch.encoders import SHAPE_FILL
+    from sim.objects import PALETTE
+    e = exp_agent.config.encoder
+    unit = lambda p: (int(im.acts[b, list(exp_agent.maps).index(p)].argmax()),
+                      round(float(im.acts[b, list(exp_agent.maps).index(p)].max()), 3))
+    v = {p: im.values[p][b].tolist() for p in im.values}
+    rgb = v["color"]
+    colour = min(PALETTE, key=lambda n: sum((x - y) ** 2 for x, y in zip(PALETTE[n], rgb)))
+    fill, r1, r2 = v["shape"]
+    kinds = {"cube": (1.0, 1.0, 1.0), "box": (1.0, r1, r2), "cylinder": (SHAPE_FILL["cylinder"], r1, r2),
+             "sphere": (SHAPE_FILL["sphere"], 1.0, 1.0)}
+    kind = min(kinds, key=lambda k: sum((x - y) ** 2 for x, y in zip(kinds[k], (fill, r1, r2)))
+               + (0.05 if k == "box" else 0.0))   # a box only when its sides clearly differ from a cube's
+    out = {"known": bool(im.known[b]), "score": round(float(im.score[b]), 3),
+           "runner_up": round(float(im.runner_up[b]), 3)}
+    if not out["known"]:
+        return out
+    size = _m.exp(v["size"][0] * _m.log(e.size_max_cm / e.size_min_cm) + _m.log(e.size_min_cm))
+    mass = _m.exp(v["weight"][0] * _m.log(e.mass_max_g / e.mass_min_g) + _m.log(e.mass_min_g))
+    exp = float(im.anticipation.expected[b])
+    return {**out,
+            "color": {"rgb": [round(x, 3) for x in rgb], "nearest": colour, "unit": unit("color")},
+            "shape": {"fill": round(fill, 3), "ratios": [round(r1, 3), round(r2, 3)], "kind": kind,
+                      "unit": unit("shape")},
+            "size": {"cm": round(size, 2), "unit": unit("size")},
+            "weight": {"g": round(mass, 1), "unit": unit("weight")},
+            "expected_cm3": None if _m.isnan(exp) else round(exp, 2)}
+
+
+def imagine(exp: Experiment, words: str) -> dict:
+    """What each order's agent retro-activates for `words` with no object in view (Agent.imagine), as plain values:
+    {"words", "orders": [per order: known, score, runner_up, and when known the colour (rgb, nearest named colour),
+    shape (fill, extent ratios, nearest kind), size (cm), weight (g), each with its most active map unit (index,
+    activity), expected_cm3], "expected_cm3": the median over the orders that know the words, or None}.
+    ValueError (one line) for a word the agents do not know."""
+    im = exp.agent.imagine(words)
+    orders = [_imagined(exp.agent, im, b) for b in range(exp.agent.batch)]
+    known = [o["expected_cm3"] for o in orders if o["known"] and o["expected_cm3"] is not None]
+    return {"words": words, "orders": orders, "expected_cm3": round(statistics.median(known), 2) if known else None}
+
+
+Experiment.imagine = imagine
