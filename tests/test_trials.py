@@ -28,7 +28,7 @@ OBJECTS = {"jar": JAR, "train": [
 def test_reach_volume_by_hand():
     # the 4 cm, 2.7 g ball floats with a cap of depth h holding 2.7 cm^3: pi h^2 (6 - h) / 3 = 2.7 -> h = 0.6973;
     # its top starts at 14 + 4 - 0.6973 = 17.303 cm and is reachable 0.1 cm below the 19.5 cm rim
-    jar = load_objects_dict(OBJECTS).jar
+    jar = parse_objects(OBJECTS).jar
     h = 0.6973
     assert math.pi * h * h * (6 - h) / 3 == pytest.approx(2.7, abs=1e-3)
     assert reach_rise_cm(jar) == pytest.approx(19.5 - 0.1 - (18 - h), abs=1e-3)
@@ -56,10 +56,6 @@ def test_water_accumulates_within_a_trial_closed_form():
     # the second drop starts from the water the first left: 150 + 100 = 250 >= 237
     assert drop(0, ("a", "b")) == {"observed_cm3": 100.0, "goal_before": False, "goal_after": True, "sank": False}
     assert drop(0, ("b",))["goal_after"] is False
-
-
-def load_objects_dict(d):
-    return parse_objects(d)
 
 
 def test_objects_file_trials_and_pool():
