@@ -20,6 +20,10 @@ Choices the paper leaves open, made here:
   the properties dominant in that context (weighted least squares, weights = recall strength), and read at the
   present object's values. Which fit applies, when both exist, comes from the recalled fates too: a logistic
   boundary over the properties not known irrelevant (heavy for its size sinks), read at the present object.
+- Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
+  one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
+  object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
+  object, the assembly they name retro-activates the maps and is anticipated from memory.
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
   most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
   recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
@@ -344,8 +348,8 @@ class Agent(nn.Module):
             tokens = phrase.lower().replace("_", " ").split()
             unknown = [w for w in tokens if w not in VOCABULARY]
             if unknown or not tokens:
-                raise ValueError(("no words given" if not tokens else f"unknown word(s) {', '.join(map(repr, unknown))}")
-                                 + f"; the words I know: {' '.join(VOCABULARY)}")
+                what = f"unknown word(s) {', '.join(map(repr, unknown))}" if tokens else "no words given"
+                raise ValueError(f"{what}; the words I know: {' '.join(VOCABULARY)}")
         w = list(self.maps).index(WORD_MAP)
         score = self.name_match(word_activity(self.maps[WORD_MAP], encode_words(phrases)))   # (B, max_assemblies)
         top = score.topk(min(2, score.shape[1]), dim=-1)
