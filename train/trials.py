@@ -104,6 +104,8 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
     name -> true displacement, for the planner and the random chooser only. names: the teacher names each object
     as it is presented (its name as words). Returns per agent the list of trial records (CONTRACTS.md)."""
     B = agent.batch
+    # read once, before the trials: a trial's later drops start from a raised level, so the goal state stored with
+    # them does not tell what rise one drop from the start level needs
     need = needed_cm3(agent)
     goal_cm3 = reach_cm3(jar)
     records = [[] for _ in range(B)]
