@@ -191,6 +191,18 @@ class Experiment:
     def final_knowledge(self) -> list[dict]:
         return [self.agent.knowledge(b) for b in range(len(self.orders))]
 
+    def imagine(self, words: str) -> dict:
+        """What each order's agent retro-activates for `words` with no object in view (Agent.imagine), as plain
+        values: {"words", "orders": [per order: known, score, runner_up, and when known the colour (rgb, nearest
+        named colour), shape (fill, extent ratios, nearest kind), size (cm), weight (g), each with its most active
+        map unit (index, activity), expected_cm3], "expected_cm3": the median over the orders that know the words,
+        or None}. ValueError (one line) for a word the agents do not know."""
+        im = self.agent.imagine(words)
+        orders = [_imagined(self.agent, im, b) for b in range(self.agent.batch)]
+        known = [o["expected_cm3"] for o in orders if o["known"] and o["expected_cm3"] is not None]
+        return {"words": words, "orders": orders,
+                "expected_cm3": round(statistics.median(known), 2) if known else None}
+
     # -- checkpointing ----------------------------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {
@@ -226,8 +238,6 @@ def load_experiment(path) -> Experiment:
 
 def _imagined(exp_agent, im, b: int) -> dict:
     """Agent b's Imagination as plain values: per property the decoded value and the map unit most active."""
-    import math as _m
-
     from aesop_torch.encoders import SHAPE_FILL
     from sim.objects import PALETTE
     e = exp_agent.config.encoder
@@ -245,8 +255,8 @@ def _imagined(exp_agent, im, b: int) -> dict:
            "runner_up": round(float(im.runner_up[b]), 3)}
     if not out["known"]:
         return out
-    size = _m.exp(v["size"][0] * _m.log(e.size_max_cm / e.size_min_cm) + _m.log(e.size_min_cm))
-    mass = _m.exp(v["weight"][0] * _m.log(e.mass_max_g / e.mass_min_g) + _m.log(e.mass_min_g))
+    size = math.exp(v["size"][0] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm))
+    mass = math.exp(v["weight"][0] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g))
     exp = float(im.anticipation.expected[b])
     return {**out,
             "color": {"rgb": [round(x, 3) for x in rgb], "nearest": colour, "unit": unit("color")},
@@ -254,19 +264,5 @@ def _imagined(exp_agent, im, b: int) -> dict:
                       "unit": unit("shape")},
             "size": {"cm": round(size, 2), "unit": unit("size")},
             "weight": {"g": round(mass, 1), "unit": unit("weight")},
-            "expected_cm3": None if _m.isnan(exp) else round(exp, 2)}
+            "expected_cm3": None if math.isnan(exp) else round(exp, 2)}
 
-
-def imagine(exp: Experiment, words: str) -> dict:
-    """What each order's agent retro-activates for `words` with no object in view (Agent.imagine), as plain values:
-    {"words", "orders": [per order: known, score, runner_up, and when known the colour (rgb, nearest named colour),
-    shape (fill, extent ratios, nearest kind), size (cm), weight (g), each with its most active map unit (index,
-    activity), expected_cm3], "expected_cm3": the median over the orders that know the words, or None}.
-    ValueError (one line) for a word the agents do not know."""
-    im = exp.agent.imagine(words)
-    orders = [_imagined(exp.agent, im, b) for b in range(exp.agent.batch)]
-    known = [o["expected_cm3"] for o in orders if o["known"] and o["expected_cm3"] is not None]
-    return {"words": words, "orders": orders, "expected_cm3": round(statistics.median(known), 2) if known else None}
-
-
-Experiment.imagine = imagine
