@@ -436,9 +436,10 @@ class Agent(nn.Module):
         # tell, or a different object that happened to end the same
         same = recall.valid[:, 0] & ~delta_c[:, 0] & ~unclear_c[:, 0] & (delta_p[:, 0].sum(-1) <= 1) & ~skipped[:, 0]
         encoded = learn & ~same
+        count = self.hub.n_assemblies.clone()
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
-        self._name(a.acts, a.present, learn)
+        self._name(a.acts, a.present, learn & (self.hub.n_assemblies == count))   # not if _encode just stored it
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
 
     def _name(self, acts, present, mask) -> None:
