@@ -442,26 +442,6 @@ class Agent(nn.Module):
         self._name(a.acts, a.present, learn & (self.hub.n_assemblies == count))   # not if _encode just stored it
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
 
-    def _name(self, acts, present, mask) -> None:
-        """A named object the hub does not know by that name gets an assembly of its own, with its name: one whose
-        episode was not encoded (nothing new to learn), or was stored on the assembly of a look-alike of another
-        name (`_encode` reuses an assembly the object matches, and once colour is irrelevant a blue cylinder
-        matches a red one). The teacher named it, and `imagine` must find it by that name; recall is unchanged,
-        since the cue of an object in view leaves names out."""
-        if WORD_MAP not in self.maps:
-            return
-        w = list(self.maps).index(WORD_MAP)
-        named = mask & present[:, w]
-        if named.any():
-            # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
-            # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
-            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
-            best, i = score.max(-1)
-            same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
-            new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
-            if new.any():
-                self.hub.allocate(acts, present, new)
-
     def _encode(self, acts, present, observed, goal_before, goal_after, fate, mask) -> None:
         """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet."""
         best, assembly = self.hub.match(acts, self.cue_present(present))
@@ -485,6 +465,26 @@ class Agent(nn.Module):
         if seen.any():
             sheet[seen, ROW_FATE] = self.fate.encode([self.fate.names[int(f)] for f in fate[seen]])
         self.memory.store(sheet, mask)
+
+    def _name(self, acts, present, mask) -> None:
+        """A named object the hub does not know by that name gets an assembly of its own, with its name: one whose
+        episode was not encoded (nothing new to learn), or was stored on the assembly of a look-alike of another
+        name (`_encode` reuses an assembly the object matches, and once colour is irrelevant a blue cylinder
+        matches a red one). The teacher named it, and `imagine` must find it by that name; recall is unchanged,
+        since the cue of an object in view leaves names out."""
+        if WORD_MAP not in self.maps:
+            return
+        w = list(self.maps).index(WORD_MAP)
+        named = mask & present[:, w]
+        if named.any():
+            # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
+            # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
+            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
+            best, i = score.max(-1)
+            same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
+            new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
+            if new.any():
+                self.hub.allocate(acts, present, new)
 
     def knowledge(self, b: int = 0) -> dict:
         return self.rules.knowledge(b)
