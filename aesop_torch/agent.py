@@ -322,15 +322,14 @@ class Agent(nn.Module):
 
     def name_match(self, word_acts: torch.Tensor) -> torch.Tensor:
         """(B, U_word) word map activity -> (B, max_assemblies) how well it matches the name stored with each
-        assembly: per hub neuron the cosine of the activity (relative to its peak) and the word pattern stored onto
-        it, averaged over the assembly's neurons; 0 for an assembly stored without a name."""
+        object: the cosine of the activity (relative to its peak, cut at the store floor as stored) and the word
+        map pattern the object's assembly retro-activates; 0 for an object stored without a name or an empty slot."""
         w = list(self.maps).index(WORD_MAP)
         word = _relative(word_acts)
         word = torch.where(word >= self.config.hub.store_floor, word, torch.zeros_like(word))   # as stored
-        stored = self.hub.W[:, w, :word.shape[-1]]                                          # (B, U_word, N)
-        cos = torch.einsum("bu,bun->bn", word, stored) / (word.norm(dim=-1, keepdim=True) *
-                                                          self.hub.norm[:, w].sqrt()).clamp_min(1e-12)
-        return self.hub.assembly_activity(cos * self.hub.wired[:, w])
+        stored = self.retro_activate(self.hub.assemblies)[:, :, w, :word.shape[-1]]            # (B, A, U_word)
+        return torch.einsum("bu,bau->ba", word, stored) / (word.norm(dim=-1, keepdim=True) *
+                                                           stored.norm(dim=-1)).clamp_min(1e-12)
 
     @torch.no_grad()
     def imagine(self, words) -> Imagination:
