@@ -239,7 +239,11 @@ class Agent(nn.Module):
     @torch.no_grad()
     def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor) -> "Anticipation":
         """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all)."""
-        recall = self.memory.recall(self.hub.bottom_up(acts, self.cue_present(present)))
+        cue = self.hub.bottom_up(acts, self.cue_present(present))
+        if not self.config.names_in_cue:
+            # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
+            cue = cue * self.memory.patterns[:, :, ROW_OBJECT].any(1).to(cue.dtype)
+        recall = self.memory.recall(cue)
         rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
         values = self.decode(acts)
