@@ -242,7 +242,7 @@ class Agent(nn.Module):
         cue = self.hub.bottom_up(acts, self.cue_present(present))
         if not self.config.names_in_cue:
             # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
-            cue = cue * self.memory.patterns[:, :, ROW_OBJECT].any(1).to(cue.dtype)
+            cue = cue * self._episode_neurons().to(cue.dtype)
         recall = self.memory.recall(cue)
         rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
@@ -251,6 +251,10 @@ class Agent(nn.Module):
         expected = self.readout(self.features(values), self.features(recalled), rewards, fates,
                                 recall.strength * recall.valid)
         return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates)
+
+    def _episode_neurons(self) -> torch.Tensor:
+        """(B, N) the hub neurons of the objects of stored episodes (the memory's object row)."""
+        return self.memory.patterns[:, :, ROW_OBJECT].any(1)
 
     def _reward_row(self, episodes: torch.Tensor) -> torch.Tensor:
         """(..., rows, cols) sheets -> (..., cols) the reward's 2-hot row, from its coarse and fine rows."""
