@@ -20,6 +20,10 @@ Choices the paper leaves open, made here:
   the properties dominant in that context (weighted least squares, weights = recall strength), and read at the
   present object's values. Which fit applies, when both exist, comes from the recalled fates too: a logistic
   boundary over the properties not known irrelevant (heavy for its size sinks), read at the present object.
+- Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
+  one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
+  object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
+  object, the assembly they name retro-activates the maps and is anticipated from memory.
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
   most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
   recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
@@ -34,8 +38,9 @@ from dataclasses import asdict, dataclass, field
 import torch
 from torch import nn
 
-from .encoders import PROPERTIES, EncoderConfig, SensoryEncoder, default_map_configs, train_property_maps
-from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode
+from .encoders import (PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder, default_map_configs,
+                       encode_words, train_property_maps, word_activity)
+from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode, _relative
 from .memory import EpisodicMemory, MemoryConfig
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
                     context_of, contradiction, outcome_unclear)
@@ -56,6 +61,9 @@ def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
     """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS)."""
     return torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
                       for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
+
+
+NAME_SAME = 0.99   # name_match of an object's own name is 1 up to float rounding; one word of 6 changed gives 0.83
 
 
 @dataclass
@@ -105,6 +113,16 @@ class AgentConfig:
     # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
     # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
     fate_ridge: float = 1e-2
+    # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
+    # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
+    # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
+    # alike). True: the word map drives the cue like a property map (at its pathway strength, 1).
+    names_in_cue: bool = False
+    # `imagine`: the words must match a stored name at least this well (cosine of the word map's patterns, read
+    # over the assembly's neurons: an object's own name gives 1, a name with one more word than was said 0.82 (2 of
+    # 3 words), one with a word in place of another 0.67) to be taken as naming it; below, the answer is "no object
+    # I know", not a guess. So "blue cylinder" names the blue heavy cylinder and "light blue cube" no yellow cube.
+    imagine_floor: float = 0.75
     seed: int = 0
 
     def __post_init__(self):
@@ -133,6 +151,17 @@ class Anticipation:
     values: dict             # map name -> (B, dim) decoded bottom-up values
     recalled_values: dict    # map name -> (B, K, dim) values each recalled episode retro-activates
     fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
+
+
+@dataclass
+class Imagination:
+    """What words retro-activate, with no object in view (leading dim B)."""
+    known: torch.Tensor      # (B,) bool: the words name a stored object (score >= AgentConfig.imagine_floor)
+    score: torch.Tensor      # (B,) how strongly the words light up the best stored assembly (1: its own name)
+    runner_up: torch.Tensor  # (B,) the next best assembly's score (0 if none): how ambiguous the words are
+    acts: torch.Tensor       # (B, P_all, U) the map activity the best assembly retro-activates
+    values: dict             # property -> (B, dim) population-decoded values of that activity
+    anticipation: "Anticipation"  # the imagined object anticipated from memory (expected NaN where not known)
 
 
 @dataclass
@@ -182,10 +211,21 @@ class Agent(nn.Module):
         present = torch.zeros(B, len(self.maps), dtype=torch.bool)
         for i, (name, som) in enumerate(self.maps.items()):
             if name in inputs:
-                a = som.activity(inputs[name])
-                acts[:, i, :a.shape[-1]] = a
-                present[:, i] = True
+                a = word_activity(som, inputs[name]) if name == WORD_MAP else som.activity(inputs[name])
+                # a name with no word the agent knows is no input (its map would still have a nearest unit)
+                has = inputs[name].abs().sum(-1) > 0 if name == WORD_MAP else torch.ones(B, dtype=torch.bool)
+                acts[:, i, :a.shape[-1]] = a * has[:, None]
+                present[:, i] = has
         return acts, present
+
+    def cue_present(self, present: torch.Tensor) -> torch.Tensor:
+        """The maps that drive the bottom-up cue of an object in view: all with input, the word map only if
+        AgentConfig.names_in_cue (names are stored with the object either way)."""
+        if self.config.names_in_cue or WORD_MAP not in self.maps:
+            return present
+        out = present.clone()
+        out[:, list(self.maps).index(WORD_MAP)] = False
+        return out
 
     def decode(self, acts: torch.Tensor) -> dict:
         """(..., P_all, U) map activities -> {property: (..., dim) population-decoded value in the map's input}."""
@@ -207,8 +247,16 @@ class Agent(nn.Module):
     @torch.no_grad()
     def anticipate(self, measurement: dict) -> "Anticipation":
         """Perceive, recall and read out the expected displacement; learns nothing."""
-        acts, present = self.activities(measurement)
-        recall = self.memory.recall(self.hub.bottom_up(acts, present))
+        return self.anticipate_acts(*self.activities(measurement))
+
+    @torch.no_grad()
+    def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor) -> "Anticipation":
+        """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all)."""
+        cue = self.hub.bottom_up(acts, self.cue_present(present))
+        if not self.config.names_in_cue:
+            # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
+            cue = cue * self._episode_neurons().to(cue.dtype)
+        recall = self.memory.recall(cue)
         rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
         values = self.decode(acts)
@@ -221,6 +269,10 @@ class Agent(nn.Module):
     def _assemblies(episodes: torch.Tensor) -> torch.Tensor:
         """(..., rows, cols) sheets -> (..., N) the object hub's assembly, from its rows."""
         return episodes[..., list(OBJECT_ROWS), :].flatten(-2)
+
+    def _episode_neurons(self) -> torch.Tensor:
+        """(B, N) the hub neurons of the objects of stored episodes (the memory's object rows)."""
+        return self._assemblies(self.memory.patterns).any(1)
 
     def _reward_row(self, episodes: torch.Tensor) -> torch.Tensor:
         """(..., rows, cols) sheets -> (..., cols) the reward's 2-hot row, from its coarse (either fate's half) and
@@ -296,6 +348,50 @@ class Agent(nn.Module):
             beta = beta + torch.linalg.solve(hess, grad[..., None])[..., 0]
         return torch.sigmoid(beta[:, 0])
 
+    def name_match(self, word_acts: torch.Tensor) -> torch.Tensor:
+        """(B, U_word) word map activity -> (B, max_assemblies) how well it matches the name stored with each
+        object: the cosine of the activity (relative to its peak, cut at the store floor as stored) and the word
+        map pattern the object's assembly retro-activates; 0 for an object stored without a name or an empty slot."""
+        w = list(self.maps).index(WORD_MAP)
+        word = _relative(word_acts)
+        word = torch.where(word >= self.config.hub.store_floor, word, torch.zeros_like(word))   # as stored
+        stored = self.retro_activate(self.hub.assemblies)[:, :, w, :word.shape[-1]]            # (B, A, U_word)
+        return torch.einsum("bu,bau->ba", word, stored) / (word.norm(dim=-1, keepdim=True) *
+                                                           stored.norm(dim=-1)).clamp_min(1e-12)
+
+    @torch.no_grad()
+    def imagine(self, words) -> Imagination:
+        """Words, no object in view: the word map's activity drives the hub (bottom-up, the word pathway alone), the
+        stored assembly it lights up most retro-activates the property maps (W', at full strength: what that object
+        looked and felt like), and that imagined object is anticipated from memory like a seen one.
+
+        words: a phrase, or B phrases. ValueError (one line) for a word outside the vocabulary or no word at all:
+        an unknown word is not guessed at. Words that name no stored object come back with known False."""
+        B = self.batch
+        phrases = [words] * B if isinstance(words, str) else list(words)
+        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
+            raise ValueError(f"words must be a phrase or {B} phrases")
+        for phrase in phrases:
+            tokens = phrase.lower().replace("_", " ").split()
+            unknown = [w for w in tokens if w not in VOCABULARY]
+            if unknown or not tokens:
+                what = f"unknown word(s) {', '.join(map(repr, unknown))}" if tokens else "no words given"
+                raise ValueError(f"{what}; the words I know: {' '.join(VOCABULARY)}")
+        w = list(self.maps).index(WORD_MAP)
+        score = self.name_match(word_activity(self.maps[WORD_MAP], encode_words(phrases)))   # (B, max_assemblies)
+        top = score.topk(min(2, score.shape[1]), dim=-1)
+        best = top.values[:, 0]
+        runner_up = top.values[:, 1] if score.shape[1] > 1 else torch.zeros_like(best)
+        known = best >= self.config.imagine_floor
+        assembly = self.hub.assemblies[torch.arange(B), top.indices[:, 0]] & known[:, None]
+        retro = self.retro_activate(assembly[:, None])[:, 0]                           # (B, P_all, U)
+        retro[:, w] = 0.0
+        seen = retro.sum(-1) > 0
+        seen[:, w] = False
+        a = self.anticipate_acts(retro, seen)
+        a.expected = torch.where(known, a.expected, torch.full_like(a.expected, float("nan")))
+        return Imagination(known, best, runner_up, retro, self.decode(retro), a)
+
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
         return self.anticipate(measurement).expected
@@ -367,8 +463,10 @@ class Agent(nn.Module):
         # tell, or a different object that happened to end the same
         same = recall.valid[:, 0] & ~delta_c[:, 0] & ~unclear_c[:, 0] & (delta_p[:, 0].sum(-1) <= 1) & ~skipped[:, 0]
         encoded = learn & ~same
+        count = self.hub.n_assemblies.clone()
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
+        self._name(a.acts, a.present, learn & (self.hub.n_assemblies == count))   # not if _encode just stored it
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
 
     @torch.no_grad()
@@ -385,7 +483,7 @@ class Agent(nn.Module):
 
     def _encode(self, acts, present, observed, goal_before, goal_after, fate, mask) -> None:
         """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet."""
-        best, assembly = self.hub.match(acts, present)
+        best, assembly = self.hub.match(acts, self.cue_present(present))
         new = mask & (best < self.config.hub.match_threshold)
         fresh = self.hub.allocate(acts, present, new)
         assembly = torch.where(new[:, None], fresh, assembly)
@@ -406,6 +504,26 @@ class Agent(nn.Module):
                                                    for r in goal_after.tolist()])
         sheet[fate < 0, ROW_FATE_UNSEEN, :2] = True
         self.memory.store(sheet, mask)
+
+    def _name(self, acts, present, mask) -> None:
+        """A named object the hub does not know by that name gets an assembly of its own, with its name: one whose
+        episode was not encoded (nothing new to learn), or was stored on the assembly of a look-alike of another
+        name (`_encode` reuses an assembly the object matches, and once colour is irrelevant a blue cylinder
+        matches a red one). The teacher named it, and `imagine` must find it by that name; recall is unchanged,
+        since the cue of an object in view leaves names out."""
+        if WORD_MAP not in self.maps:
+            return
+        w = list(self.maps).index(WORD_MAP)
+        named = mask & present[:, w]
+        if named.any():
+            # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
+            # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
+            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
+            best, i = score.max(-1)
+            same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
+            new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
+            if new.any():
+                self.hub.allocate(acts, present, new)
 
     def knowledge(self, b: int = 0) -> dict:
         return self.rules.knowledge(b)

@@ -11,14 +11,16 @@ Each measurement is turned into the input of one map:
            one length for how big the object is, as the paper's size; the largest extent alone would call a thin
            rod as big as a cube of the same height
   weight = log(mass) normalised to [0, 1] over mass_min_g..mass_max_g               (1-d)
-  word   = bag of words over a fixed vocabulary, scaled to unit length              (20-d)
+  word   = bag of words over a fixed vocabulary, scaled to unit length              (20-d); the word map hears
+           the words one at a time: its activity for a phrase is the sum of each word's own activity pattern, each
+           scaled to unit length (`word_activity`), so every word of a name counts once however many units it has
 Log scales because perception of size and weight is roughly logarithmic (Weber's law) and the objects span more
 than an order of magnitude in both: on a log scale 14 g vs 90 g is as distinct as 90 g vs 580 g.
 
 Before the experiment the maps are trained on the infant's prior visual and haptic experience
 (`developmental_samples`): colours all over the RGB cube, the four shape kinds with random proportions, sizes and
-masses log-uniform over the ranges above, and colour + shape phrases. The maps therefore know the *space* of
-properties, never the experiment's objects.
+masses log-uniform over the ranges above, and single words of the vocabulary (heard one at a time). The maps
+therefore know the *space* of properties and the words, never the experiment's objects or names.
 """
 
 from __future__ import annotations
@@ -73,6 +75,17 @@ def _batched(v, name: str, tail: tuple) -> torch.Tensor:
     if not torch.isfinite(t).all():
         raise ValueError(f"measurement '{name}' has non-finite values")
     return t
+
+
+def word_activity(som, words: torch.Tensor) -> torch.Tensor:
+    """(B, V) bags of words (encode_words) -> (B, n_units) the word map's activity for each phrase: the sum over its
+    words of the map's response to that word alone, each scaled to unit length. A name then binds, and a phrase
+    matches, word by word: "red heavy cylinder" and "red light cylinder" share two of three words' patterns (cosine
+    2/3), whatever the map's layout. A phrase with no known word gives zeros."""
+    V = words.shape[-1]
+    table = som.activity(torch.eye(V, device=words.device))                       # (V, U): each word alone
+    table = table / table.norm(dim=-1, keepdim=True).clamp_min(1e-12)
+    return (words > 0).to(table.dtype) @ table
 
 
 def encode_words(text, vocabulary: tuple = VOCABULARY) -> torch.Tensor:
@@ -146,8 +159,8 @@ class SensoryEncoder(nn.Module):
 def developmental_samples(n: int, generator: torch.Generator, config: EncoderConfig | None = None) -> dict:
     """n random prior experiences -> dict map name -> (n, dim) map inputs, through the same encoding as the
     experiment's measurements (colour uniform in the RGB cube; shape kind uniform over the four, with random
-    proportions; size and mass log-uniform over the config ranges; phrases colour + shape, unit length like
-    `encode_words`)."""
+    proportions; size and mass log-uniform over the config ranges; one word of the vocabulary each, uniformly:
+    the word map learns the words, and a phrase is heard word by word, `word_activity`)."""
     if n < 1:
         raise ValueError(f"n must be >= 1, got {n}")
     encoder = SensoryEncoder(config)
@@ -166,11 +179,7 @@ def developmental_samples(n: int, generator: torch.Generator, config: EncoderCon
     fill = torch.tensor([SHAPE_FILL[s] for s in SHAPE_WORDS])[kind]
     mass = _log_uniform(g, c.mass_min_g, c.mass_max_g, (n,))
     out = encoder({"rgb": rgb, "extent_cm": props * size, "fill": fill, "mass_g": mass})
-    words = torch.zeros(n, len(VOCABULARY))
-    rows = torch.arange(n)
-    words[rows, torch.randint(len(COLOR_WORDS), (n,), generator=g)] = 1.0
-    words[rows, len(COLOR_WORDS) + torch.randint(len(SHAPE_WORDS), (n,), generator=g)] = 1.0
-    out[WORD_MAP] = words / words.norm(dim=-1, keepdim=True)
+    out[WORD_MAP] = torch.eye(len(VOCABULARY))[torch.randint(len(VOCABULARY), (n,), generator=g)]
     return out
 
 
@@ -190,9 +199,9 @@ def default_map_configs() -> dict[str, SOMConfig]:
       11.5 vs 5 cm are 5 units apart.
     - weight 1x30 over log mass: a unit per factor 1.29 in mass, sigma = the spacing; 14, 90, 420 g are 7 and
       6 units apart.
-    - word 8x8 over 20-d phrases: the 36 colour + shape phrases each get a unit (the ordering phase is what
-      separates categories; 4000 steps did in 40 of 40 seeds, 2000 in 39). Phrases one word apart are 1.0 apart:
-      sigma 0.4 gives them 0.04, and a known phrase with an added adjective (0.6 away) 0.32.
+    - word 8x8 over the 20 words (one-hot): every word gets units of its own (20 distinct winners in seeds 0-3),
+      ~3 each; two words are 1.41 apart, so sigma 0.4 gives a word ~0.002 on another's units (the ordering
+      phase is what separates them). Phrases are read word by word (`word_activity`).
     1-d data get 1-d maps (a line cannot fold). The radius starts at about a quarter of the map's longest side.
     """
     return {

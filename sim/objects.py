@@ -61,7 +61,9 @@ MAX_NESTING = 32             # the schema nests 4 deep; deeper input would only 
 MAX_DIGITS = 32              # digits of an integer literal; a 400-digit mass would overflow the float conversion
 OBJECT_KEYS = {"name", "shape", "color", "dims_cm", "mass_g"}
 JAR_KEYS = {"inner_diameter_cm", "height_cm", "water_depth_cm"}
-TOP_KEYS = {"jar", "train", "probe"}
+TOP_KEYS = {"jar", "train", "probe", "pool", "trials"}
+TRIAL_KEYS = {"stand"}
+MAX_STAND = 8                # objects on the stand of one goal trial: the exact random baseline enumerates subsets
 
 
 class ObjectsFileError(ValueError):
@@ -173,21 +175,31 @@ class ObjectSpec:
 
 @dataclass(frozen=True)
 class ObjectSet:
-    """A validated objects file: the jar, the objects dropped one per episode (train), the ones only lifted (probe)."""
+    """A validated objects file: the jar, the objects dropped one per episode (train), the ones only lifted (probe),
+    and for goal trials (sim/trial.py) objects used only there (pool) and the trials, each the names on the stand."""
     jar: JarSpec
     train: list[ObjectSpec]
     probe: list[ObjectSpec] = field(default_factory=list)
+    pool: list[ObjectSpec] = field(default_factory=list)
+    trials: list[tuple[str, ...]] = field(default_factory=list)
 
     def get(self, name: str) -> ObjectSpec:
-        for o in self.train + self.probe:
+        for o in self.train + self.probe + self.pool:
             if o.name == name:
                 return o
-        raise ValueError(f"no object named {name!r} (known: {', '.join(o.name for o in self.train + self.probe)})")
+        known = ", ".join(o.name for o in self.train + self.probe + self.pool)
+        raise ValueError(f"no object named {name!r} (known: {known})")
 
     def canonical(self) -> dict:
-        """The resolved set as plain JSON values (colours as rgb): equal iff the experiments are the same."""
-        return {"jar": self.jar.to_dict(), "train": [o.to_dict() for o in self.train],
-                "probe": [o.to_dict() for o in self.probe]}
+        """The resolved set as plain JSON values (colours as rgb): equal iff the experiments are the same. A file
+        without pool and trials gives exactly the keys it always did."""
+        out = {"jar": self.jar.to_dict(), "train": [o.to_dict() for o in self.train],
+               "probe": [o.to_dict() for o in self.probe]}
+        if self.pool:
+            out["pool"] = [o.to_dict() for o in self.pool]
+        if self.trials:
+            out["trials"] = [{"stand": list(t)} for t in self.trials]
+        return out
 
 
 def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
@@ -271,7 +283,7 @@ def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     if "train" not in data:
         raise ObjectsFileError("the objects file has no 'train' list")
     groups = {}
-    for group in ("train", "probe"):
+    for group in ("train", "probe", "pool"):
         items = data.get(group, [])
         if not isinstance(items, list):
             raise ObjectsFileError(f"'{group}' must be a list of objects")
@@ -279,12 +291,36 @@ def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     if not groups["train"]:
         raise ObjectsFileError("'train' is empty: at least one object must be dropped")
     seen = set()
-    for o in groups["train"] + groups["probe"]:
+    for o in groups["train"] + groups["probe"] + groups["pool"]:
         if o.name in seen:
-            raise ObjectsFileError(f"object '{o.name}' field 'name': duplicate name (train and probe names "
+            raise ObjectsFileError(f"object '{o.name}' field 'name': duplicate name (train, probe and pool names "
                                    f"must all differ)")
         seen.add(o.name)
-    return ObjectSet(jar, groups["train"], groups["probe"])
+    return ObjectSet(jar, groups["train"], groups["probe"], groups["pool"], _parse_trials(data.get("trials", []),
+                                                                                         seen))
+
+
+def _parse_trials(items, names: set) -> list[tuple[str, ...]]:
+    """`trials`: a list of {"stand": [names]}, 1 to MAX_STAND distinct objects of train, probe or pool each."""
+    if not isinstance(items, list):
+        raise ObjectsFileError("'trials' must be a list of {\"stand\": [names]}")
+    trials = []
+    for i, t in enumerate(items):
+        where = f"trials[{i}]"
+        if not isinstance(t, dict):
+            raise ObjectsFileError(f"{where}: must be an object {{\"stand\": [names]}}")
+        _no_unknown_keys(t, TRIAL_KEYS, where)
+        stand = t.get("stand")
+        if not isinstance(stand, list) or not 1 <= len(stand) <= MAX_STAND:
+            raise ObjectsFileError(f"{where} field 'stand': must be a list of 1 to {MAX_STAND} object names")
+        for n in stand:
+            if not isinstance(n, str) or n not in names:
+                raise ObjectsFileError(f"{where} field 'stand': {json.dumps(n)} is not an object of train, probe "
+                                       f"or pool")
+        if len(set(stand)) != len(stand):
+            raise ObjectsFileError(f"{where} field 'stand': an object is listed twice")
+        trials.append(tuple(stand))
+    return trials
 
 
 def _no_unknown_keys(d: dict, allowed: set, where: str):

@@ -438,3 +438,10 @@ class World:
         """Perceive, lift, weigh and put back the named object (no drop): its measurement dict."""
         from sim.episode import inspect_object
         return inspect_object(self, name)
+
+    def drop_next(self, name: str, record=None):
+        """A drop of a goal trial (sim/trial.py): the jar is not reset, what was dropped before stays in the water
+        (it is no longer this world's `body`, so the stand takes the next object). An EpisodeOutcome."""
+        from sim.trial import drop_next
+        self.body = None
+        return drop_next(self, name, record)

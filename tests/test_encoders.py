@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from aesop_torch.encoders import (COLOR_WORDS, MAP_NAMES, PROPERTIES, SHAPE_WORDS, VOCABULARY, WORD_MAP,
-                                  EncoderConfig, SensoryEncoder, developmental_samples, encode_words,
+                                  EncoderConfig, SensoryEncoder, developmental_samples, encode_words, word_activity,
                                   train_property_maps)
 
 # the project's palette (sim/objects.py), repeated here so the model's tests do not import the simulator
@@ -104,10 +104,10 @@ def test_developmental_samples():
     for k in ("size", "weight"):
         assert 0 <= s[k].min() < 0.02 and 0.98 < s[k].max() <= 1
         assert s[k].mean() == pytest.approx(0.5, abs=0.03)
-    # phrases: exactly one colour and one shape word
-    words = s[WORD_MAP] > 0
-    assert (words[:, :len(COLOR_WORDS)].sum(-1) == 1).all()
-    assert (words[:, len(COLOR_WORDS):len(COLOR_WORDS) + len(SHAPE_WORDS)].sum(-1) == 1).all()
+    # words: one word of the vocabulary each, every word heard (2000 draws of 20 words: ~100 each)
+    words = s[WORD_MAP]
+    assert ((words == 0) | (words == 1)).all() and (words.sum(-1) == 1).all()
+    assert (words.sum(0) > 50).all()
     again = developmental_samples(2000, torch.Generator().manual_seed(0))
     assert all(torch.equal(s[k], again[k]) for k in s)
 
@@ -142,15 +142,20 @@ def test_maps_resolve_the_experiment(maps, name):
     assert (off < 0.05).all(), f"{name}: a clearly different object activates another's unit: {act.tolist()}"
 
 
-def test_word_map_gives_every_colour_shape_phrase_its_own_unit(maps):
-    phrases = [f"{c} {s}" for c in COLOR_WORDS for s in SHAPE_WORDS]
+def test_word_map_gives_every_word_its_own_unit_and_reads_phrases_word_by_word(maps):
     som = maps[WORD_MAP]
-    x = encode_words(phrases)
-    winners = som.winner(x)
-    assert len(winners.unique()) == len(phrases)
-    assert (som.activity(x)[torch.arange(len(phrases)), winners] > 0.95).all()
-    # a name with an adjective lands on its colour + shape unit
-    assert som.winner(encode_words("red_heavy_cylinder")) == som.winner(encode_words("red cylinder"))
+    words = torch.eye(len(VOCABULARY))
+    winners = som.winner(words)
+    assert len(winners.unique()) == len(VOCABULARY)
+    act = som.activity(words)[:, winners]       # [i, j]: word i on word j's unit
+    assert (act.diagonal() > 0.95).all() and (act[~torch.eye(len(VOCABULARY), dtype=torch.bool)] < 0.01).all()
+    # a phrase is the sum of its words' unit-length patterns: the cosine of two names is the fraction of shared
+    # words (red heavy cylinder vs red light cylinder: 2 of 3), whatever order the words come in
+    cos = lambda a, b: float(torch.nn.functional.cosine_similarity(a, b, dim=-1))
+    rhc, rlc = (word_activity(som, encode_words([p]))[0] for p in ("red_heavy_cylinder", "red light cylinder"))
+    assert cos(rhc, word_activity(som, encode_words(["cylinder heavy red"]))[0]) == pytest.approx(1.0, abs=1e-6)
+    assert cos(rhc, rlc) == pytest.approx(2 / 3, abs=0.02)
+    assert word_activity(som, encode_words(["xyzzy"])).abs().sum() == 0
 
 
 def test_train_property_maps_is_ordered_and_deterministic(maps):

@@ -18,7 +18,9 @@ PAPER = {"train": [
     {"name": "red_light_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 14}],
     "probe": [
     {"name": "purple_heavy_cylinder", "shape": "cylinder", "color": "purple", "dims_cm": [6.36, 11.5], "mass_g": 400},
-    {"name": "green_light_cylinder", "shape": "cylinder", "color": "green", "dims_cm": [6.36, 11.5], "mass_g": 20}]}
+    {"name": "green_light_cylinder", "shape": "cylinder", "color": "green", "dims_cm": [6.36, 11.5], "mass_g": 20}],
+    # a goal trial after the exploration: the same look, 400 g (sinks, 365 cm^3, reaches the ball) or 14 g (floats)
+    "trials": [{"stand": ["red_light_cylinder", "purple_heavy_cylinder"]}]}
 
 
 def runner(*args):
@@ -82,6 +84,16 @@ def test_summary_contract(paper_run):
     assert errs[0] > 5 and errs[-1] < 0.5
     assert (out / "figure2.png").stat().st_size > 10_000
     assert "order_independent: undefined (one order)" in stdout and str(out) in stdout
+    # the goal trial, by hand: the 400 g cylinder (expected like the heavy one) alone makes the ball reachable
+    (t,) = summary["runs"][0]["trials"]
+    assert set(t) == {"stand", "chosen", "expected_cm3", "observed_cm3", "drops", "goal_reached", "fewest_drops",
+                      "random_drops_mean", "excess_drops", "first_choice_optimal", "expected_drops",
+                      "recall_strength", "agreeing_episodes", "explored"}
+    assert t["stand"] == ["red_light_cylinder", "purple_heavy_cylinder"] and t["chosen"] == ["purple_heavy_cylinder"]
+    assert t["expected_cm3"][0] == pytest.approx(365, rel=0.05) and t["explored"] == [False]
+    assert t["observed_cm3"][0] == pytest.approx(365.3, rel=0.02) and t["goal_reached"]
+    assert (t["drops"], t["fewest_drops"], t["random_drops_mean"], t["excess_drops"]) == (1, 1, 1.5, 0)
+    assert "trial 1: purple_heavy_cylinder" in stdout
 
 
 def test_tensorboard_tags_and_values(paper_run):
@@ -110,6 +122,7 @@ def test_tensorboard_tags_and_values(paper_run):
     err = series("prediction/abs_error_cm3")
     assert set(err) == {2, 3}  # no prediction in episode 1
     assert err[3] == pytest.approx(abs(eps[2]["predicted_cm3"] - eps[2]["archimedes_cm3"]), abs=0.01)
+    assert series("trials/drops") == {1: 1.0} and series("trials/excess_drops") == {1: 0.0}
 
 
 def test_checkpoint_loads_weights_only_and_predicts_for_a_new_object(paper_run):

@@ -116,6 +116,9 @@ class Experiment:
     records: list[list[dict]] = field(default_factory=list)
     outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
     probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
+    # per order, the goal trials' records (train/trials.py), played after the exploration; not checkpointed: they
+    # are a function of the final state
+    trials: list = field(default_factory=list)
     # False: the agents' maps are not trained here because a state dict is about to bring them (from_state_dict)
     develop: InitVar[bool] = True
 
@@ -142,6 +145,7 @@ class Experiment:
         names = [self.train_names[o[self.t]] for o in self.orders]
         outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
         meas = stack_measurements([o["measurement"] for o in outs])
+        meas["words"] = names          # the teacher names each object as it is presented (bound in the hub)
         observed = torch.tensor([o["observed_cm3"] for o in outs])
         before = torch.tensor([o["goal_before"] for o in outs])
         after = torch.tensor([o["goal_after"] for o in outs])
@@ -187,6 +191,18 @@ class Experiment:
     def final_knowledge(self) -> list[dict]:
         return [self.agent.knowledge(b) for b in range(len(self.orders))]
 
+    def imagine(self, words: str) -> dict:
+        """What each order's agent retro-activates for `words` with no object in view (Agent.imagine), as plain
+        values: {"words", "orders": [per order: known, score, runner_up, and when known the colour (rgb, nearest
+        named colour), shape (fill, extent ratios, nearest kind), size (cm), weight (g), each with its most active
+        map unit (index, activity), expected_cm3], "expected_cm3": the median over the orders that know the words,
+        or None}. ValueError (one line) for a word the agents do not know."""
+        im = self.agent.imagine(words)
+        orders = [_imagined(self.agent, im, b) for b in range(self.agent.batch)]
+        known = [o["expected_cm3"] for o in orders if o["known"] and o["expected_cm3"] is not None]
+        return {"words": words, "orders": orders,
+                "expected_cm3": round(statistics.median(known), 2) if known else None}
+
     # -- checkpointing ----------------------------------------------------------------------------------------
     def state_dict(self) -> dict:
         return {
@@ -218,3 +234,35 @@ def load_experiment(path) -> Experiment:
         return Experiment.from_state_dict(load(path)["experiment"])
     finally:
         torch.set_num_threads(threads)
+
+
+def _imagined(exp_agent, im, b: int) -> dict:
+    """Agent b's Imagination as plain values: per property the decoded value and the map unit most active."""
+    from aesop_torch.encoders import SHAPE_FILL
+    from sim.objects import PALETTE
+    e = exp_agent.config.encoder
+    unit = lambda p: (int(im.acts[b, list(exp_agent.maps).index(p)].argmax()),
+                      round(float(im.acts[b, list(exp_agent.maps).index(p)].max()), 3))
+    v = {p: im.values[p][b].tolist() for p in im.values}
+    rgb = v["color"]
+    colour = min(PALETTE, key=lambda n: sum((x - y) ** 2 for x, y in zip(PALETTE[n], rgb)))
+    fill, r1, r2 = v["shape"]
+    kinds = {"cube": (1.0, 1.0, 1.0), "box": (1.0, r1, r2), "cylinder": (SHAPE_FILL["cylinder"], r1, r2),
+             "sphere": (SHAPE_FILL["sphere"], 1.0, 1.0)}
+    kind = min(kinds, key=lambda k: sum((x - y) ** 2 for x, y in zip(kinds[k], (fill, r1, r2)))
+               + (0.05 if k == "box" else 0.0))   # a box only when its sides clearly differ from a cube's
+    out = {"known": bool(im.known[b]), "score": round(float(im.score[b]), 3),
+           "runner_up": round(float(im.runner_up[b]), 3)}
+    if not out["known"]:
+        return out
+    size = math.exp(v["size"][0] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm))
+    mass = math.exp(v["weight"][0] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g))
+    exp = float(im.anticipation.expected[b])
+    return {**out,
+            "color": {"rgb": [round(x, 3) for x in rgb], "nearest": colour, "unit": unit("color")},
+            "shape": {"fill": round(fill, 3), "ratios": [round(r1, 3), round(r2, 3)], "kind": kind,
+                      "unit": unit("shape")},
+            "size": {"cm": round(size, 2), "unit": unit("size")},
+            "weight": {"g": round(mass, 1), "unit": unit("weight")},
+            "expected_cm3": None if math.isnan(exp) else round(exp, 2)}
+

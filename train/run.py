@@ -348,7 +348,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
-    from train.tensorboard_log import OrderLog
+    from train.tensorboard_log import OrderLog, trial_line
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
 
@@ -431,6 +431,18 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         with Step("population", len(orders), "order") as bar:
             population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
                                         exp.config, progress=bar.to)
+    if objects.trials:
+        from train.trials import play_trials
+        print(f"goal trials: {len(objects.trials)} trial(s) with each of {len(exp.orders)} order(s)' agents, the jar "
+              "not reset between the drops of a trial (each new sequence of drops simulated from a fresh jar)",
+              flush=True)
+        with Step("goal trials", None, "drop", announce=False) as bar:
+            exp.trials = play_trials(exp, objects, progress=lambda seq: bar.update(1, " > ".join(seq)))
+        for i, r in enumerate(exp.trials[0]):
+            print(trial_line(i, r), flush=True)
+        for b, log in enumerate(logs):
+            for i, r in enumerate(exp.trials[b]):
+                log.trial(i, r)
     summary = build_summary(exp, population)
     from train.figures import figure2
     fig = figure2(exp.records)

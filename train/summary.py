@@ -29,6 +29,8 @@ def build_summary(exp, population: dict | None = None) -> dict:
     finals = exp.final_knowledge()
     runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b]}
             for b in range(len(exp.orders))]
+    for b, trials in enumerate(getattr(exp, "trials", None) or []):   # only when the objects file has trials
+        runs[b]["trials"] = trials
     keys = population["final_knowledge"] if population else [knowledge_key(k) for k in finals]
     # one order cannot show independence of the order: undefined there (null), never a vacuous true
     independent = len(set(keys)) == 1 if len(keys) > 1 else None
@@ -57,6 +59,13 @@ def knowledge_table(summary: dict) -> str:
         lines.append(f"{i + 1:<7}{cells}{err}")
     if len(runs) > 12:
         lines.append(f"... {len(runs) - 12} more orders in summary.json")
+    trials = [t for run in runs for t in run.get("trials", [])]
+    if trials:
+        n = len(trials)
+        lines.append(f"goal trials: {sum(t['goal_reached'] for t in trials)} of {n} reached the ball; drops "
+                     f"{sum(t['drops'] for t in trials)} (planner's fewest {sum(t['fewest_drops'] for t in trials)}, "
+                     f"random {sum(t['random_drops_mean'] for t in trials):.1f}); first choice optimal in "
+                     f"{sum(t['first_choice_optimal'] for t in trials)} of {n} (all orders)")
     pop = summary.get("population")
     if pop:
         lines.append(f"population: {pop['orders']} orders, {100 * pop['agree_fraction']:.2f}% agree on "

@@ -3,6 +3,8 @@
 Scalars `certainty/<property>`, `prediction/abs_error_cm3` (|prediction - Archimedes| for the dropped object, once a
 prediction can be made), `prediction/probe_rel_error`, `rules/<property>/<E|G|U|S>` (1 when that rule fired that
 episode, else 0); text `episodes` (one line per episode); hparams once per run, in the run's own directory.
+Goal trials (train/trials.py), step = trial (1-based): `trials/drops`, `trials/excess_drops` (drops beyond the
+planner's fewest) and text `trials` (one line per trial).
 """
 
 from __future__ import annotations
@@ -30,6 +32,14 @@ def episode_line(t: int, rec: dict) -> str:
     return line
 
 
+def trial_line(i: int, rec: dict) -> str:
+    exp = lambda v: "-" if v is None else f"{v:.0f}"
+    chose = " > ".join(f"{n} (expected {exp(e)}, observed {o:.0f})"
+                       for n, e, o in zip(rec["chosen"], rec["expected_cm3"], rec["observed_cm3"]))
+    return (f"trial {i + 1}: {chose}; {rec['drops']} drop(s), fewest {rec['fewest_drops']}, random "
+            f"{rec['random_drops_mean']:.2f}, goal {'reached' if rec['goal_reached'] else 'not reached'}")
+
+
 class OrderLog:
     """Writer for one order's run directory. `purge_step` drops events a killed run wrote past its checkpoint."""
 
@@ -52,6 +62,13 @@ class OrderLog:
         if rec["probe_rel_error"] is not None:
             w.add_scalar("prediction/probe_rel_error", rec["probe_rel_error"], step)
         w.add_text("episodes", episode_line(t, rec), step)
+        w.flush()
+
+    def trial(self, i: int, rec: dict) -> None:
+        w, step = self.writer, i + 1
+        w.add_scalar("trials/drops", rec["drops"], step)
+        w.add_scalar("trials/excess_drops", rec["excess_drops"], step)
+        w.add_text("trials", trial_line(i, rec), step)
         w.flush()
 
     def close(self) -> None:

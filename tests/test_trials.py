@@ -1,0 +1,211 @@
+"""Goal trials: the yardsticks by hand, a 2-object trial's choice by hand, water accumulating within a trial (closed
+form and physics), the objects file's trials, and the word path (names bound in the hub, imagined from words)."""
+
+import itertools
+import math
+
+import pytest
+import torch
+
+from aesop_torch import Agent, AgentConfig
+from sim.objects import ObjectsFileError, archimedes_cm3, load_objects, parse_objects
+from sim.trial import (closed_form_drop, drops_to_goal, fewest_drops, optimal_first, random_drops_mean, reach_cm3,
+                       reach_rise_cm)
+from train.experiment import Experiment, closed_form_outcomes, stack_measurements
+from train.trials import choose, needed_cm3, roomy_copy, run_trials
+
+JAR = {"inner_diameter_cm": 12.0, "height_cm": 19.5, "water_depth_cm": 14.0}
+CYL = {"shape": "cylinder", "dims_cm": [6.36, 11.5]}
+OBJECTS = {"jar": JAR, "train": [
+    {"name": "red_heavy_cylinder", "color": "red", "mass_g": 420, **CYL},
+    {"name": "red_light_cylinder", "color": "red", "mass_g": 14, **CYL},
+    {"name": "green_heavy_box", "shape": "box", "color": "green", "dims_cm": [4.0, 5.0, 9.0], "mass_g": 300}],
+    "pool": [{"name": "blue_heavy_cylinder", "color": "blue", "mass_g": 400, **CYL},
+             {"name": "blue_light_cylinder", "color": "blue", "mass_g": 30, **CYL}],
+    "trials": [{"stand": ["blue_light_cylinder", "blue_heavy_cylinder"]}]}
+
+
+def test_reach_volume_by_hand():
+    # the 4 cm, 2.7 g ball floats with a cap of depth h holding 2.7 cm^3: pi h^2 (6 - h) / 3 = 2.7 -> h = 0.6973;
+    # its top starts at 14 + 4 - 0.6973 = 17.303 cm and is reachable 0.1 cm below the 19.5 cm rim
+    jar = parse_objects(OBJECTS).jar
+    h = 0.6973
+    assert math.pi * h * h * (6 - h) / 3 == pytest.approx(2.7, abs=1e-3)
+    assert reach_rise_cm(jar) == pytest.approx(19.5 - 0.1 - (18 - h), abs=1e-3)
+    assert reach_cm3(jar) == pytest.approx((19.4 - 18 + h) * math.pi * 36, abs=0.1)
+
+
+def test_planner_and_random_chooser_by_hand():
+    # 300 alone reaches 237: one drop. A random order starts with it 1 time in 3, else needs exactly 2 drops
+    # (100 + 300, 100 + 150 = 250, 150 + 300, 150 + 100 = 250): 1/3 + 2 * 2/3 = 5/3
+    v = [300.0, 100.0, 150.0]
+    assert fewest_drops(v, 237) == 1 and optimal_first(v, 237) == [True, False, False]
+    assert random_drops_mean(v, 237) == pytest.approx(5 / 3)
+    assert random_drops_mean(v, 237) == pytest.approx(
+        sum(drops_to_goal(p, 237) for p in itertools.permutations(v)) / 6)     # the same, counted over all orders
+    # none alone, any two: every first choice is optimal
+    assert fewest_drops([100.0, 150.0, 120.0], 237) == 2 and all(optimal_first([100.0, 150.0, 120.0], 237))
+    # never reachable: every order drops everything
+    assert fewest_drops([10.0, 20.0], 237) == 2 and random_drops_mean([10.0, 20.0], 237) == 2
+
+
+def test_water_accumulates_within_a_trial_closed_form():
+    outcomes = {"a": {"observed_cm3": 150.0, "sank": True}, "b": {"observed_cm3": 100.0, "sank": False}}
+    drop = closed_form_drop(outcomes, 237.0)
+    assert drop(0, ("a",)) == {"observed_cm3": 150.0, "goal_before": False, "goal_after": False, "sank": True}
+    # the second drop starts from the water the first left: 150 + 100 = 250 >= 237
+    assert drop(0, ("a", "b")) == {"observed_cm3": 100.0, "goal_before": False, "goal_after": True, "sank": False}
+    assert drop(0, ("b",))["goal_after"] is False
+
+
+def test_objects_file_trials_and_pool():
+    objs = parse_objects(OBJECTS)
+    assert objs.trials == [("blue_light_cylinder", "blue_heavy_cylinder")] and objs.get("blue_heavy_cylinder")
+    assert set(objs.canonical()) == {"jar", "train", "probe", "pool", "trials"}
+    plain = parse_objects({k: v for k, v in OBJECTS.items() if k not in ("pool", "trials")})
+    assert set(plain.canonical()) == {"jar", "train", "probe"}        # a file without them: as it always was
+    for bad, words in [({"stand": []}, "1 to 8"), ({"stand": ["nope"]}, '"nope" is not an object'),
+                       ({"stand": ["red_heavy_cylinder"] * 2}, "twice"), ({"stand": "red"}, "list"),
+                       ({"stand": ["red_heavy_cylinder"], "x": 1}, "unknown key 'x'"), ([], "must be an object")]:
+        with pytest.raises(ObjectsFileError, match=words):
+            parse_objects({**OBJECTS, "trials": [bad]})
+    with pytest.raises(ObjectsFileError, match="duplicate name"):
+        parse_objects({**OBJECTS, "pool": OBJECTS["pool"] + [OBJECTS["train"][0]]})
+
+
+@pytest.fixture(scope="module")
+def explored():
+    """One order's agent after the three train objects, closed form (every object displaces its Archimedes volume)."""
+    objs = parse_objects(OBJECTS)
+    every = parse_objects({**OBJECTS, "train": OBJECTS["train"] + OBJECTS["pool"], "pool": [], "trials": []})
+    outcomes, _ = closed_form_outcomes(every, reachable_above_cm3=reach_cm3(objs.jar))
+    exp = Experiment([o["name"] for o in OBJECTS["train"]], [], [[0, 1, 2]],
+                     config=AgentConfig(som_samples=2000, som_epochs=10))
+    exp.outcomes = {n: outcomes[n] for n in exp.train_names}
+    while not exp.done:
+        exp.step(lambda name, b, t: outcomes[name])
+    return exp, objs, outcomes
+
+
+def test_two_object_trial_chooses_what_closes_the_gap_by_hand(explored):
+    exp, objs, outcomes = explored
+    # by hand: the ball needs 237 cm^3; the 400 g cylinder sinks and displaces 365 (one drop), the 30 g one floats
+    # and displaces 30 (it would need the other after it): the right first choice is the heavy one. The agent saw a
+    # 420 g and a 14 g cylinder of this size (and a box): it must expect more of the heavy one
+    need = reach_cm3(objs.jar)
+    assert 30 < need < archimedes_cm3(objs.get("blue_heavy_cylinder"), objs.jar)
+    # the agent's own estimate of the need, from memory: between 180 (the box, ball out of reach) and 365 (reached)
+    assert float(needed_cm3(exp.agent)[0]) == pytest.approx((180 + 365.3) / 2, rel=0.02)
+    stand = objs.trials[0]
+    arch = {n: archimedes_cm3(objs.get(n), objs.jar) for n in stand}
+    meas = {n: outcomes[n]["measurement"] for n in stand}
+    before = {k: v.clone() for k, v in exp.agent.state_dict().items()}
+    (rec,), = run_trials(roomy_copy(exp.agent, 2), [stand], meas, closed_form_drop(outcomes, need), objs.jar, arch)
+    assert rec["chosen"] == ["blue_heavy_cylinder"] and rec["drops"] == 1 and rec["goal_reached"]
+    heavy, light = (float(exp.agent.predict(stack_measurements([meas[n]]))[0]) for n in stand[::-1])
+    assert heavy > light and rec["expected_cm3"][0] == pytest.approx(heavy, abs=0.01) and rec["first_choice_optimal"]
+    assert (rec["fewest_drops"], rec["random_drops_mean"], rec["excess_drops"]) == (1, 1.5, 0)
+    assert 0.5 < rec["recall_strength"][0] <= 1 and 0 <= rec["agreeing_episodes"][0] <= 3
+    # the trial learned on a copy: the run's agent (its checkpoint) is as the exploration left it
+    assert all(torch.equal(before[k], v) for k, v in exp.agent.state_dict().items())
+
+
+def test_a_novice_explores_and_water_accumulates_to_the_goal(explored):
+    exp, objs, outcomes = explored
+    novice = Agent(exp.config, batch=1, develop=False)
+    novice.maps = exp.agent.maps
+    stand = ("red_light_cylinder", "green_heavy_box", "blue_light_cylinder")
+    arch = {n: archimedes_cm3(objs.get(n), objs.jar) for n in stand}
+    meas = {n: outcomes[n]["measurement"] for n in stand}
+    (rec,), = run_trials(novice, [stand], meas, closed_form_drop(outcomes, reach_cm3(objs.jar)), objs.jar, arch)
+    assert rec["explored"][0] and rec["expected_cm3"][0] is None        # nothing recalled: a random first choice
+    # 14 + 180 + 30 = 224 < 237: the stand empties, the ball stays out of reach, every object was dropped
+    assert rec["drops"] == 3 and not rec["goal_reached"] and sorted(rec["chosen"]) == sorted(stand)
+    assert sum(rec["observed_cm3"]) == pytest.approx(sum(arch.values()), abs=0.1)
+
+
+def test_choice_rule_by_hand():
+    g = torch.Generator().manual_seed(0)
+    # the gap is 200: 250 closes it alone (1 drop), 120 + 90 needs two; ties in drops go to the larger expectation
+    assert choose([120.0, 250.0, 90.0], 200.0, g)[:2] == (1, False)
+    assert choose([120.0, 250.0, 300.0], 200.0, g)[0] == 2
+    assert choose([120.0, 90.0], 200.0, g)[2] == [2.0, 2.0] and choose([120.0, 90.0], 200.0, g)[0] == 0
+    # an unknown need: the largest; nothing anticipated: explore
+    assert choose([120.0, 250.0], math.inf, g)[0] == 1
+    assert choose([math.nan, math.nan], 200.0, g)[1] is True
+
+
+def test_physics_water_is_not_reset_between_the_drops_of_a_trial():
+    from sim.trial import PhysicsTrials
+    objs = load_objects("sim/default_objects.json")
+    trial = PhysicsTrials(objs, seed=0)
+    try:
+        first = trial.outcome(("green_heavy_box",))
+        second = trial.outcome(("green_heavy_box", "red_small_heavy_cylinder"))
+    finally:
+        trial.close()
+    area = objs.jar.area_cm2
+    # the second drop starts at the level the first left (not the start level), and the level keeps both
+    assert second.level_before_cm == pytest.approx(first.level_after_cm, abs=0.005)
+    assert first.level_before_cm == pytest.approx(objs.jar.water_depth_cm, abs=0.01)
+    both = archimedes_cm3(objs.get("green_heavy_box"), objs.jar) + \
+        archimedes_cm3(objs.get("red_small_heavy_cylinder"), objs.jar)
+    assert (second.level_after_cm - first.level_before_cm) * area == pytest.approx(both, rel=0.03)
+    assert second.observed_cm3 == pytest.approx(45.7, rel=0.05) and second.sank
+    assert not second.goal_reached_after       # 180 + 46 < 237: still out of reach
+
+
+# -- words ------------------------------------------------------------------------------------------------------
+
+def test_word_cue_retro_activates_the_named_objects_units(explored):
+    exp, objs, outcomes = explored
+    agent = exp.agent
+    maps = list(agent.maps)
+
+    def units(name):
+        acts, _ = agent.activities(stack_measurements([outcomes[name]["measurement"]]))
+        return {p: int(acts[0, maps.index(p)].argmax()) for p in ("color", "shape", "size", "weight")}
+
+    for words, name in (("heavy red cylinder", "red_heavy_cylinder"), ("red light cylinder", "red_light_cylinder"),
+                        ("green box", "green_heavy_box")):
+        im = agent.imagine(words)
+        assert bool(im.known[0]), words
+        got = {p: int(im.acts[0, maps.index(p)].argmax()) for p in ("color", "shape", "size", "weight")}
+        assert got == units(name), words        # the named object's own winner unit in every property map
+        assert float(im.anticipation.expected[0]) == pytest.approx(outcomes[name]["observed_cm3"], rel=0.05)
+    # the exact name scores 1; two of its three words 0.82 (cosine of bags of words, sqrt(2/3))
+    assert float(agent.imagine("red heavy cylinder").score[0]) == pytest.approx(1.0, abs=1e-4)
+    assert float(agent.imagine("green box").score[0]) == pytest.approx(math.sqrt(2 / 3), abs=0.02)
+    # words that name no stored object: a clear "not known", no guess; an unknown word: refused
+    nothing = agent.imagine("yellow sphere")
+    assert not bool(nothing.known[0]) and math.isnan(float(nothing.anticipation.expected[0]))
+    with pytest.raises(ValueError, match="unknown word.*'elephant'"):
+        agent.imagine("blue elephant")
+
+
+def test_names_do_not_change_what_an_object_in_view_recalls(explored):
+    exp, _, outcomes = explored
+    m = stack_measurements([outcomes["blue_heavy_cylinder"]["measurement"]])
+    plain, named = exp.agent.anticipate(m), exp.agent.anticipate({**m, "words": ["blue_heavy_cylinder"]})
+    assert bool(named.present[0, -1]) and not bool(plain.present[0, -1])
+    assert torch.equal(plain.recall.episodes, named.recall.episodes)
+    assert torch.equal(plain.recall.strength, named.recall.strength) and torch.equal(plain.expected, named.expected)
+
+
+def test_ask_cli(tmp_path):
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    ask = [sys.executable, str(root / "train" / "ask.py"), str(root / "checkpoints" / "default.pt")]
+    r = subprocess.run(ask + ["heavy red cylinder"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    last = r.stdout.strip().splitlines()[-1]
+    assert last.startswith("expected_cm3=") and float(last.split("=")[1]) == pytest.approx(365, rel=0.06)
+    assert "colour red" in r.stdout and "shape cylinder" in r.stdout
+    r = subprocess.run(ask + ["light blue cube"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1] == "expected_cm3=unknown"
+    r = subprocess.run(ask + ["purple elephant"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "'elephant'" in r.stderr and not r.stdout
+    r = subprocess.run([*ask[:2], str(tmp_path / "nope.pt"), "red cube"], capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1

@@ -1,0 +1,233 @@
+"""Goal trials with a learned model: choose what to drop from memory, drop, observe, learn, until the ball is reachable.
+
+A trial (sim/trial.py): the ball starts out of reach, several objects wait on the stand, the jar is not reset
+between drops. Each of the B agents (one per order) plays the trial on its own:
+  lift and weigh every candidate (its measurement), anticipate its displacement from memory (Agent.anticipate),
+  choose, drop it, read the rise, apply the rules and encode (Agent.step: learning stays on, a surprise teaches),
+  and repeat until the ball is reachable or the stand is empty.
+
+The choice comes from the model, never from the answer. The agent's own estimate of the rise it needs is read from
+its episodic memory: the displacements that did and did not make the ball reachable (each episode stores the body
+state after the drop). The choice is the candidate with the fewest expected drops to close the remaining gap
+(1 if its anticipated displacement closes it, else 1 + the fewest of the rest), ties to the largest anticipated
+displacement; with no estimate of the need yet, simply the largest. An agent that recalls nothing for any candidate
+(a novice) explores: a random choice from a generator seeded by the run's seed and the trial. How sure each
+anticipation is goes into the record: the strongest recall's strength and how many recalled episodes agree with it.
+
+Trials run after the exploration, on a copy of each agent with room for the trials' episodes and objects: the
+run's checkpoint stays the state after the exploration, and the trials are a function of it (a resumed run plays
+them the same). Within a run the trials follow each other, so what one trial taught is known in the next.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+from aesop_torch.agent import ROW_BODY_END, Agent
+from aesop_torch.rules import contradiction
+from sim.trial import fewest_drops, optimal_first, random_drops_mean, reach_cm3
+from train.experiment import stack_measurements
+
+TRIAL_SEED = 0x7121A1   # mixed into the run's seed for the novice's random choices
+
+
+def roomy_copy(agent: Agent, extra: int) -> Agent:
+    """A copy of `agent` (every learned buffer) whose memory holds `extra` more episodes and whose hub `extra` more
+    objects (the run sizes both to the train objects). The property maps are shared: they never change."""
+    import copy
+    config = copy.deepcopy(agent.config)
+    config.memory.max_episodes += extra
+    config.hub.max_assemblies += extra
+    new = Agent(config, batch=agent.batch, develop=False)
+    new.maps = agent.maps
+    for part in ("hub", "memory", "rules"):
+        src, dst = getattr(agent, part), getattr(new, part)
+        for key, value in src.state_dict().items():
+            target = getattr(dst, key)
+            with torch.no_grad():
+                target[tuple(slice(0, n) for n in value.shape)] = value
+    return new
+
+
+def needed_cm3(agent: Agent) -> torch.Tensor:
+    """(B,) the displacement each agent expects the goal to need, from its memory alone: midway between the largest
+    stored displacement that left the ball out of reach and the smallest that made it reachable (only the latter if
+    none failed below it); inf where no stored drop ever reached the ball (the agent does not know yet)."""
+    mem = agent.memory
+    sheets = mem.patterns                                                       # (B, M, rows, cols)
+    stored = torch.arange(sheets.shape[1])[None] < mem.count[:, None]           # (B, M)
+    reward = agent.reward.decode(agent._reward_row(sheets))                     # (B, M), NaN if invalid
+    goal = agent.body.encode("goal_reached")
+    reached = (sheets[:, :, ROW_BODY_END] == goal).all(-1) & stored & ~torch.isnan(reward)
+    missed = ~(sheets[:, :, ROW_BODY_END] == goal).all(-1) & stored & ~torch.isnan(reward)
+    inf = torch.full_like(reward, math.inf)
+    hi = torch.where(reached, reward, inf).amin(-1)                             # (B,)
+    lo = torch.where(missed & (reward < hi[:, None]), reward, -inf).amax(-1)
+    return torch.where(torch.isfinite(lo) & torch.isfinite(hi), (lo + hi) / 2, hi)
+
+
+def _expected_drops(expected: list[float], gap: float) -> list[float]:
+    """Per candidate, the drops the agent expects if it drops that one now (NaN anticipations count as 0)."""
+    e = [0.0 if math.isnan(x) else x for x in expected]
+    if not math.isfinite(gap):
+        return [math.inf] * len(e)
+    out = []
+    for i, x in enumerate(e):
+        rest = e[:i] + e[i + 1:]
+        if x >= gap:
+            out.append(1.0)
+        elif rest and sum(rest) + x >= gap:
+            out.append(1.0 + fewest_drops(rest, gap - x))
+        else:
+            out.append(math.inf)
+    return out
+
+
+def choose(expected: list[float], gap: float, generator: torch.Generator) -> tuple[int, bool, list[float]]:
+    """(index chosen, explored, expected drops per candidate). See the module docstring."""
+    if all(math.isnan(x) for x in expected):
+        return int(torch.randint(len(expected), (1,), generator=generator)), True, [math.nan] * len(expected)
+    drops = _expected_drops(expected, gap)
+    key = lambda i: (math.isnan(expected[i]), drops[i], -expected[i])
+    return min(range(len(expected)), key=key), False, drops
+
+
+def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar, archimedes: dict, seed: int = 0,
+               names: bool = True) -> list[list[dict]]:
+    """Play every trial in turn with each of the agent's B agents (learning on, carried from trial to trial).
+
+    stands: per trial the names on the stand. measurements: name -> plain measurement (the candidate lifted and
+    weighed). drop(b, sequence) -> {"observed_cm3", "goal_before", "goal_after", "sank"[, "measurement"]}: what the
+    world reports for the last drop of `sequence` (agent b's drops so far in this trial, in order). archimedes:
+    name -> true displacement, for the planner and the random chooser only. names: the teacher names each object
+    as it is presented (its name as words). Returns per agent the list of trial records (CONTRACTS.md)."""
+    B = agent.batch
+    # read once, before the trials: a trial's later drops start from a raised level, so the goal state stored with
+    # them does not tell what rise one drop from the start level needs
+    need = needed_cm3(agent)
+    goal_cm3 = reach_cm3(jar)
+    records = [[] for _ in range(B)]
+    tol = agent.config.rules
+    for i, stand in enumerate(stands):
+        g = torch.Generator().manual_seed((seed * 1_000_003 + TRIAL_SEED + i) % (2 ** 63))
+        left = [list(stand) for _ in range(B)]
+        seq = [[] for _ in range(B)]
+        total = [0.0] * B
+        rec = [{"stand": list(stand), "chosen": [], "expected_cm3": [], "observed_cm3": [], "recall_strength": [],
+                "agreeing_episodes": [], "expected_drops": [], "explored": []} for _ in range(B)]
+        active = [True] * B
+        while any(active):
+            # anticipate every candidate on the stand, all agents at once (each agent's own candidates)
+            width = max(len(left[b]) for b in range(B) if active[b])
+            exp = torch.full((B, width), math.nan)
+            strength = torch.zeros(B, width)
+            agree = torch.zeros(B, width, dtype=torch.long)
+            for j in range(width):
+                ms = [measurements[left[b][j]] if active[b] and j < len(left[b]) else measurements[stand[0]]
+                      for b in range(B)]
+                a = agent.anticipate(_with_names(ms, [left[b][j] if active[b] and j < len(left[b]) else stand[0]
+                                                      for b in range(B)], names))
+                exp[:, j] = a.expected
+                valid = a.recall.valid & ~torch.isnan(a.rewards)
+                strength[:, j] = (a.recall.strength * valid).amax(-1)
+                agree[:, j] = (valid & ~contradiction(a.expected[:, None], a.rewards, tol)).sum(-1)
+            picks = [None] * B
+            for b in range(B):
+                if active[b]:
+                    n = len(left[b])
+                    e = exp[b, :n].tolist()
+                    k, explored, drops = choose(e, float(need[b]) - total[b], g)
+                    picks[b] = left[b][k]
+                    r = rec[b]
+                    r["chosen"].append(picks[b])
+                    r["expected_cm3"].append(None if math.isnan(e[k]) else round(e[k], 2))
+                    r["recall_strength"].append(round(float(strength[b, k]), 4))
+                    r["agreeing_episodes"].append(int(agree[b, k]))
+                    r["expected_drops"].append(None if not math.isfinite(drops[k]) else int(drops[k]))
+                    r["explored"].append(explored)
+                    left[b].pop(k)
+                    seq[b].append(picks[b])
+            outs = [drop(b, tuple(seq[b])) if active[b] else None for b in range(B)]
+            learn = torch.tensor(active)
+            filler = next(o for o in outs if o is not None)
+            outs_or = [o if o is not None else filler for o in outs]
+            ms = [o.get("measurement") or measurements[picks[b] or stand[0]] for b, o in enumerate(outs_or)]
+            agent.step(_with_names(ms, [picks[b] or stand[0] for b in range(B)], names),
+                       torch.tensor([o["observed_cm3"] for o in outs_or]),
+                       torch.tensor([o["goal_before"] for o in outs_or]),
+                       torch.tensor([o["goal_after"] for o in outs_or]), learn=learn,
+                       sank=torch.tensor([o["sank"] for o in outs_or]))
+            for b in range(B):
+                if active[b]:
+                    o = outs[b]
+                    total[b] += o["observed_cm3"]
+                    rec[b]["observed_cm3"].append(round(o["observed_cm3"], 2))
+                    rec[b]["goal_reached"] = bool(o["goal_after"])
+                    active[b] = not o["goal_after"] and bool(left[b])
+        volumes = [archimedes[n] for n in stand]
+        best = fewest_drops(volumes, goal_cm3)
+        first_ok = optimal_first(volumes, goal_cm3)
+        for b in range(B):
+            r = rec[b]
+            r["drops"] = len(r["chosen"])
+            r["fewest_drops"] = best
+            r["random_drops_mean"] = round(random_drops_mean(volumes, goal_cm3), 4)
+            r["excess_drops"] = r["drops"] - best
+            r["first_choice_optimal"] = bool(first_ok[stand.index(r["chosen"][0])])
+            records[b].append({k: r[k] for k in ("stand", "chosen", "expected_cm3", "observed_cm3", "drops",
+                                                 "goal_reached", "fewest_drops", "random_drops_mean", "excess_drops",
+                                                 "first_choice_optimal", "expected_drops", "recall_strength",
+                                                 "agreeing_episodes", "explored")})
+    return records
+
+
+def _with_names(ms: list[dict], names: list[str], on: bool) -> dict:
+    out = stack_measurements(ms)
+    if on:
+        out["words"] = list(names)
+    return out
+
+
+def outcome_dict(outcome) -> dict:
+    """The part of a world EpisodeOutcome a trial keeps."""
+    from train.experiment import plain_measurement
+    return {"observed_cm3": float(outcome.observed_cm3), "goal_before": bool(outcome.goal_reachable_before),
+            "goal_after": bool(outcome.goal_reached_after), "sank": bool(outcome.sank),
+            "measurement": plain_measurement(outcome.measurement)}
+
+
+def play_trials(exp, objects, world_trials=None, progress=None) -> list[list[dict]]:
+    """The runner's goal trials: every trial of the objects file with every order's agent, in the simulated world
+    (sim.trial.PhysicsTrials: each drop into the jar as earlier drops left it, the IK reach test after each). A
+    candidate is lifted and weighed as in the exploration (its measurement from there, or inspected here for an
+    object only trials use). world_trials: a PhysicsTrials (default: one for the file and the run's seed)."""
+    from sim.objects import archimedes_cm3
+    from sim.trial import PhysicsTrials
+    from train.experiment import plain_measurement
+
+    own = world_trials is None
+    world = PhysicsTrials(objects, seed=exp.seed) if own else world_trials
+    try:
+        measurements = {n: o["measurement"] for n, o in exp.outcomes.items()}
+        measurements.update({n: p["measurement"] for n, p in exp.probes.items()})
+        for stand in objects.trials:
+            for n in stand:
+                if n not in measurements:
+                    if world.world is None:
+                        world.outcome(())   # builds the world
+                    measurements[n] = plain_measurement(world.world.inspect(n))
+        archimedes = {n: archimedes_cm3(objects.get(n), objects.jar) for stand in objects.trials for n in stand}
+        agent = roomy_copy(exp.agent, sum(len(s) for s in objects.trials))
+
+        def drop(b, sequence):
+            out = outcome_dict(world.outcome(sequence))
+            if progress is not None:
+                progress(sequence)
+            return out
+
+        return run_trials(agent, objects.trials, measurements, drop, objects.jar, archimedes, seed=exp.seed)
+    finally:
+        if own:
+            world.close()
