@@ -412,7 +412,7 @@ class Agent(nn.Module):
         for i, p in enumerate(PROPERTIES):
             lo, hi = self.config.delta_p_band[i]
             if p == "weight":
-                hi = hi + noise     # noise widens the unclear band: a change it could fake is not called one
+                lo, hi = lo + noise / 3, hi + noise   # unchanged within 1 sigma of the felt mass, changed beyond 3
             gap = torch.nan_to_num(gaps[p], nan=0.0)
             changed.append(gap > hi)
             unclear.append((gap > lo) & (gap <= hi))
