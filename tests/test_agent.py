@@ -185,3 +185,22 @@ def test_pairwise_evidence_gives_the_batch_answer_of_the_paper_episodes(paper):
     assert delta_p[0, 2].tolist() == [False, False, False, True] and delta_c[0, 2]
     assert batch_knowledge(delta_p, delta_c, context).tolist() == [IRRELEVANT, LIKELY_IRRELEVANT, LIKELY_IRRELEVANT,
                                                                    DOMINANT]
+
+
+def test_a_lifetime_of_objects_is_recalled_exactly_and_a_novel_one_finds_its_nearest_first():
+    # 32 cylinders on a grid of mass and size, each remembered once: every one comes back first and exact from its
+    # own cue (the hub over 12 rows), and a novel object between two stored ones recalls those two first
+    agent = Agent(AgentConfig(seed=0))
+    sizes, masses = (3.0, 5.0, 8.0, 12.0), (10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)
+    grid = [(d, m) for d in sizes for m in masses]
+    for d, m in grid:
+        meas, v, sinks = cylinder(RED, d, 1.6 * d, m)
+        agent.remember(meas, torch.tensor([v]), torch.zeros(1, dtype=torch.bool), torch.zeros(1, dtype=torch.bool),
+                       sank=torch.tensor([sinks]))
+    stored = agent.memory.patterns[0, :len(grid)]
+    for i, (d, m) in enumerate(grid):
+        recall = agent.anticipate(cylinder(RED, d, 1.6 * d, m)[0]).recall
+        assert recall.valid[0, 0] and torch.equal(recall.episodes[0, 0], stored[i])
+    recall = agent.anticipate(cylinder(RED, 5.0, 8.0, 28.0)[0]).recall           # between 20 g and 40 g at 5 cm
+    first_two = {int((stored == recall.episodes[0, k]).flatten(1).all(1).nonzero()) for k in range(2)}
+    assert first_two == {grid.index((5.0, 20.0)), grid.index((5.0, 40.0))}
