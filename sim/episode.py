@@ -136,11 +136,19 @@ def _take(world, body: int, seen) -> float:
 
 
 def drop_episode(world, name: str, record=None) -> EpisodeOutcome:
-    """The full episode for the named object (sim.world.World.run_episode)."""
+    """The full episode for the named object (sim.world.World.run_episode), from a reset jar."""
     t0 = time.perf_counter()
+    world.reset(name)
+    return drop_into_jar(world, name, record, t0)
+
+
+def drop_into_jar(world, name: str, record=None, t0: float | None = None) -> EpisodeOutcome:
+    """Put the named object on the stand, look, take, weigh, carry and drop it into the jar as it is (a goal trial
+    does not reset it between drops); observed_cm3 is this drop's rise of the level alone. The caller seeds the
+    sensor noise (World.reset(name) or World.seed_noise(name))."""
+    t0 = time.perf_counter() if t0 is None else t0
     rec = _recorder(record)
     spec = world.spec(name)
-    world.reset(name)
     world.recorder = rec
     try:
         body = world.place_on_stand(name)

@@ -16,12 +16,11 @@ from __future__ import annotations
 
 import itertools
 import math
-import zlib
 from dataclasses import dataclass
 
 import numpy as np
 
-from sim.objects import JarSpec, ObjectsConfig, archimedes_cm3
+from sim.objects import JarSpec, ObjectsConfig
 
 
 @dataclass(frozen=True)
@@ -116,41 +115,10 @@ def drop_next(world, name: str, record=None):
     it is (what earlier drops of the trial left in it stays). The sensor noise is seeded by (seed, name) as in an
     exploration drop, so the object is perceived as it was then. Returns a sim.episode.EpisodeOutcome whose
     observed_cm3 is this drop's rise of the level alone."""
-    import time
+    from sim.episode import drop_into_jar
 
-    from sim.episode import EpisodeOutcome, _recorder, _rests_on_bottom, _take
-    from sim.water import CM
-
-    t0 = time.perf_counter()
-    rec = _recorder(record)
-    spec = world.spec(name)
-    world.rng = np.random.default_rng([world.seed, zlib.crc32(name.encode())])
-    world.recorder = rec
-    try:
-        body = world.place_on_stand(name)
-        world.settle()
-        level_before = world.level_reading_cm()
-        reachable_before = world.goal_reachable()
-        seen = world.look(body)
-        mass = _take(world, body, seen)
-        palm = world.robot.hand_pose()[0].numpy()
-        drop = world.drop_xy()
-        world.move_palm([drop[0], drop[1], palm[2]])
-        world.release()
-        world.move_palm(world.robot.hand_pose()[0].numpy() + [0, 0, world.config.hover_cm * CM], waypoints=2)
-        world.go_home()
-        settled = world.settle()
-        sank = _rests_on_bottom(world, body)
-        level_after = world.level_reading_cm()
-        reached_after = world.goal_reachable()
-    finally:
-        world.recorder = None
-    return EpisodeOutcome(
-        name=name, measurement={**seen.measurement, "mass_g": mass},
-        observed_cm3=(level_after - level_before) * world.objects.jar.area_cm2, level_before_cm=level_before,
-        level_after_cm=level_after, archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
-        goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
-        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=spec.true_values())
+    world.seed_noise(name)
+    return drop_into_jar(world, name, record)
 
 
 def simulate_sequence(world, names, record=None) -> list:

@@ -246,7 +246,11 @@ class World:
         """
         self._restore()
         if name is not None:
-            self.rng = np.random.default_rng([self.seed, zlib.crc32(name.encode())])
+            self.seed_noise(name)
+
+    def seed_noise(self, name: str) -> None:
+        """The sensor noise of the named object's drop, seeded from (seed, name): the same whatever went before."""
+        self.rng = np.random.default_rng([self.seed, zlib.crc32(name.encode())])
 
     def place_on_stand(self, name: str, orientation=(0.0, 0.0, 0.0, 1.0)) -> int:
         """Create the named object on the stand, resting on it, in `orientation` (xyzw; default upright and
