@@ -40,7 +40,7 @@ from torch import nn
 
 from .encoders import (PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder, default_map_configs,
                        encode_words, train_property_maps, word_activity)
-from .hub import ActionHub, BodyHub, Fate, HubConfig, ObjectHub, RewardCode, _relative
+from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode, _relative
 from .memory import EpisodicMemory, MemoryConfig
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
                     context_of, contradiction, outcome_unclear)
@@ -199,7 +199,7 @@ class Agent(nn.Module):
         self.hub = ObjectHub({name: m.weights.shape[0] for name, m in self.maps.items()}, config.hub, batch=batch)
         self.memory = EpisodicMemory(config.memory, batch=batch)
         self.rules = CausalRules(config.rules, batch=batch, properties=PROPERTIES)
-        self.actions, self.body, self.reward, self.fate = ActionHub(), BodyHub(), RewardCode(), Fate()
+        self.actions, self.body, self.reward = ActionHub(), BodyHub(), RewardCode()
 
     # -- perception -------------------------------------------------------------------------------------------
     def activities(self, measurement: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -564,7 +564,7 @@ class Agent(nn.Module):
         nn.Module.__init__(new)
         new.config, new.batch, new.properties = self.config, index.numel(), self.properties
         new.encoder, new.maps = self.encoder, self.maps
-        new.actions, new.body, new.reward, new.fate = self.actions, self.body, self.reward, self.fate
+        new.actions, new.body, new.reward = self.actions, self.body, self.reward
         sizes = {name: m.weights.shape[0] for name, m in self.maps.items()}
         # the parts keep their types (a subclass, e.g. a memory with a different recall schedule, stays one)
         dev = self.hub.branches.device

@@ -175,10 +175,7 @@ class CausalRules(nn.Module):
         # small to show, or one that cancelled): Growth outweighs Elimination.
         excl = torch.zeros(B, C, dtype=torch.long, device=sets.device)
         for _ in range(P):
-            rest = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
-            rest.scatter_reduce_(2, sets & ~excl[..., None], self.held, reduce="amax")
-            grew = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
-            grew.scatter_reduce_(2, sets & ~excl[..., None], self.contradicted, reduce="amax")
+            rest, grew = self._without(self.held, excl), self._without(self.contradicted, excl)
             new = excl | ((rest & ~grew & single).long() * sets).sum(-1)
             if torch.equal(new, excl):
                 break
@@ -194,14 +191,12 @@ class CausalRules(nn.Module):
         both = (self.eliminated[:, FLOATING] & self.eliminated[:, SINKING]).long() @ self._weights
         excl[:, MIXED] |= both
         # each contradicted change set without its excluded properties; an emptied set is noise nothing explains
-        eff = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
-        eff.scatter_reduce_(2, sets & ~excl[..., None], self.contradicted, reduce="amax")
+        eff = self._without(self.contradicted, excl)
         eff[..., 0] = False
         # an explanation uses no eliminated property and holds a changed property of every contradicted set; of
         # those, the ones that leave the fewest held comparisons unexplained (a held comparison whose change set
         # holds a cause should have seen the outcome move, unless effects cancelled), then the smallest
-        held = torch.zeros(B, C, n, dtype=torch.bool, device=sets.device)
-        held.scatter_reduce_(2, sets & ~excl[..., None], self.held, reduce="amax")
+        held = self._without(self.held, excl)
         held[..., 0] = False
         allowed = (sets & excl[..., None]) == 0                                       # (B, C, n)
         explains = (~eff[:, :, None, :] | self._hits).all(-1) & allowed & (sets > 0)  # (B, C, n)
@@ -214,6 +209,14 @@ class CausalRules(nn.Module):
         state[self.eliminated.any(1)] = IRRELEVANT
         state[self.dominant.any(1)] = DOMINANT
         self.state.copy_(state)
+
+    @staticmethod
+    def _without(evidence: torch.Tensor, excl: torch.Tensor) -> torch.Tensor:
+        """(B, C, 2^P) change sets seen -> the same with the properties excluded in each context (excl (B, C), a
+        bit mask) taken out of every set: a set left empty lands on index 0."""
+        sets = torch.arange(evidence.shape[-1], device=evidence.device)
+        out = torch.zeros_like(evidence)
+        return out.scatter_reduce_(2, (sets & ~excl[..., None]).expand_as(evidence), evidence, reduce="amax")
 
     def strength_from_knowledge(self, dtype=torch.float32) -> torch.Tensor:
         """(B, P) hub pathway strengths: dominant strengthened, irrelevant drastically reduced, likely irrelevant
