@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from aesop_torch import Agent, AgentConfig
+from aesop_torch.agent import feature_columns
 from aesop_torch.rules import RULE_NAMES
 
 RED, BLUE = (0.85, 0.1, 0.1), (0.1, 0.2, 0.85)
@@ -133,6 +134,26 @@ def test_readout_follows_each_fates_law_and_the_boundary_learned_from_memory():
     cols = torch.ones(1, 6, dtype=torch.bool)   # every column (the colour ones are constant)
     assert agent._will_sink(cols, xk - feat(2.5, 200.0), fates, w).item() > 0.9
     assert agent._will_sink(cols, xk - feat(6.0, 15.0), fates, w).item() < 0.1
+
+
+def test_sinkers_of_another_shape_and_size_are_read_by_their_volume():
+    """Sinkers displace fill x size^3. Two recalled sinkers, a cube (fill 1) of 4 cm and a sphere (fill pi/6) of
+    6 cm, fix a line in log volume; a cylinder (fill pi/4) of 5 cm lies on it, with shape and size both followed.
+    Two episodes cannot fix separate slopes for fill and size, so only the volume column hits the cylinder's."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 1, 1] = agent.rules.dominant[0, 1, 2] = True    # sinking: shape and size
+
+    def feat(fill, size_cm):
+        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(1000.0)])
+
+    sinkers = [(1.0, 4.0), (math.pi / 6, 6.0)]
+    xk = torch.stack([feat(f, s) for f, s in sinkers])[None]
+    y = torch.tensor([[f * s ** 3 for f, s in sinkers]])
+    got = agent.readout(feat(math.pi / 4, 5.0)[None], xk, y, torch.ones(1, 2, dtype=torch.long), torch.ones(1, 2))
+    assert got.item() == pytest.approx(math.pi / 4 * 125.0, rel=1e-3)   # 98.2 cm^3
+    # the columns: shape's own only where size is not followed
+    cols = feature_columns(torch.tensor([[False, True, True, False], [False, True, False, False]]))
+    assert cols.tolist() == [[False] * 3 + [False, True, False], [False] * 3 + [True, False, False]]
 
 
 def test_delta_property_sees_an_eliminated_pathway(paper):
