@@ -15,7 +15,9 @@ objects of every shape, sinkers and floaters, in random jars): 8 train and 8 pro
   over (set, order); nothing recalled counts as 100 %) after 1..8 episodes, and after 16 and 24 on the long sets,
   beside two peers fed the same episodes in the same orders: k nearest neighbours (k = 3, distance-weighted) and a
   small MLP (2 x 32 tanh, Adam, 400 full-batch steps), both on the raw measurements on log scales
-  ([rgb, log extents, fill, log mass] -> log cm^3);
+  ([rgb, log extents, fill, log mass] -> log cm^3); and a reference that is told what the agent must learn, the
+  law's form and each probe's true fate (a least-squares power law of measured mass and volume per fate, `law_form`):
+  what the same episodes allow a learner that only has to fit the slopes, not a peer;
 - a PNG of the learning curves (benches/generalization.png).
 Last line: `sets_order_independent=F sequential_equals_batch=F median_error_8=E median_error_24=E`.
 
@@ -103,6 +105,29 @@ def mlp(train_x: torch.Tensor, train_y: torch.Tensor, x: torch.Tensor, seed: int
         return forward(Xq) * ys + ym
 
 
+def law_features(meas: dict) -> torch.Tensor:
+    """(n, 2) the law-form reference's inputs: log mass (g), log volume (fill x the extents' product, cm^3)."""
+    return torch.stack([meas["mass_g"].log(), (meas["fill"] * meas["extent_cm"].prod(-1)).log()], 1)
+
+
+def law_form(train_x: torch.Tensor, train_y: torch.Tensor, train_sank: torch.Tensor, x: torch.Tensor,
+             sinks: torch.Tensor, ridge: float = 1e-5) -> torch.Tensor:
+    """A reference, not a peer: it is told what the agent must learn. Per probe, a least-squares fit of log cm^3
+    on (log mass, log volume) over the seen episodes of the probe's *true* fate (Archimedes' form: each fate's
+    displacement is a power law of the measured mass or volume, its slopes fitted, not given). train (B, t, 2),
+    (B, t), (B, t) bool; probes (Q, 2), (Q,) bool -> (B, Q) log cm^3; the mean of all seen where none of its fate."""
+    out = []
+    for q in range(x.shape[0]):
+        w = (train_sank == sinks[q]).double()                                  # (B, t)
+        A = torch.cat([torch.ones_like(train_y[..., None]), train_x - x[q]], -1).double()
+        reg = torch.eye(3, dtype=A.dtype) * ridge * w.sum(-1)[:, None, None].clamp_min(1)
+        reg[:, 0, 0] = 1e-12
+        beta = torch.linalg.solve(torch.einsum("btf,bt,btg->bfg", A, w, A) + reg,
+                                  torch.einsum("btf,bt,bt->bf", A, w, train_y.double()))
+        out.append(torch.where(w.sum(-1) > 0, beta[:, 0], train_y.double().mean(-1)))
+    return torch.stack(out, 1).float()
+
+
 def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool = True) -> dict:
     objs = parse_objects(generate(seed, n_train, 8, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
@@ -117,8 +142,10 @@ def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool
     pmeas = stack_measurements([probes[n]["measurement"] for n in probe_names])
     truth = torch.tensor([probes[n]["archimedes_cm3"] for n in probe_names])
     agent = template.select([0] * B)
-    errs = {"agent": [], "knn": [], "mlp": []}
+    errs = {"agent": [], "knn": [], "mlp": [], "law": []}
     x_all, y_all, xq = raw_features(meas), observed.log(), raw_features(pmeas)
+    law_all, law_q = law_features(meas), law_features(pmeas)
+    probe_sinks = torch.tensor([o.sinks for o in objs.probe])
     for t in range(n_train):
         obj = orders[:, t]
         agent.step({k: v[obj] for k, v in meas.items()}, observed[obj], before[obj], after[obj], sank=sank[obj])
@@ -130,6 +157,7 @@ def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool
             tx, ty = x_all[seen], y_all[seen]
             errs["knn"].append(rel_errors(knn(tx, ty, xq).exp(), truth))
             errs["mlp"].append(rel_errors(mlp(tx, ty, xq, seed * 1000 + t).exp(), truth))
+            errs["law"].append(rel_errors(law_form(law_all[seen], ty, sank[seen], law_q, probe_sinks).exp(), truth))
     batch = batch_knowledge(*template.pairwise_evidence(meas, observed, sank), template.config.rules)
     return {"keys": knowledge_keys(agent.rules.state), "batch": knowledge_keys(batch[None])[0],
             "errors": {k: torch.stack(v, 0) for k, v in errs.items() if v}}   # (n_train, B) each
@@ -175,12 +203,12 @@ def main():
         curves[n_train] = {who: [float(torch.cat([r["errors"][who][t] for r in rs]).median()) for t in range(n_train)]
                            for who in rs[0]["errors"]}
     print("\nmedian novel-object error vs Archimedes (median over probes, then over (set, order))")
-    print(f"{'episodes':>9} {'agent':>8} {'kNN':>8} {'MLP':>8}")
+    print(f"{'episodes':>9} {'agent':>8} {'kNN':>8} {'MLP':>8}   {'law form':>8} (told the form and the fate)")
     rows = [(8, t) for t in range(8)] + [(24, t) for t in (7, 15, 23)]
     for n_train, t in rows:
         c = curves[n_train]
         tag = f"{t + 1}" + (" (long)" if n_train == 24 else "")
-        print(f"{tag:>9} {c['agent'][t]:>8.3f} {c['knn'][t]:>8.3f} {c['mlp'][t]:>8.3f}")
+        print(f"{tag:>9} {c['agent'][t]:>8.3f} {c['knn'][t]:>8.3f} {c['mlp'][t]:>8.3f}   {c['law'][t]:>8.3f}")
     ahead = all(curves[n]["agent"][t] < min(curves[n]["knn"][t], curves[n]["mlp"][t]) for n, t in rows)
     print(f"agent ahead of both peers at every episode count: {ahead}")
     _plot(curves)
@@ -195,7 +223,7 @@ def _plot(curves: dict) -> None:
     import matplotlib.pyplot as plt
     fig, axes = plt.subplots(1, 2, figsize=(10, 4))
     for ax, (n_train, c) in zip(axes, curves.items()):
-        for who, style in (("agent", "-o"), ("knn", "--s"), ("mlp", ":^")):
+        for who, style in (("agent", "-o"), ("knn", "--s"), ("mlp", ":^"), ("law", "-.")):
             ax.plot(range(1, n_train + 1), [100 * e for e in c[who]], style, label=who, markersize=3)
         ax.set_title(f"{n_train} train objects per set", fontsize=9)
         ax.set_xlabel("episodes (objects explored)")
