@@ -28,6 +28,8 @@ Choices the paper leaves open, made here:
   body hub's goal state (`hear_goal`); that state, with the body's present state (the ball out of reach), cues the
   episodic memory through the body rows (`goal_recall`), and what the goal needs is read from the episodes it
   brings back (train.trials.needed_cm3). A phrase without the goal's words is no goal the agent knows: no recall.
+  The goal words join the word map's vocabulary, not a lexicon of their own, so a goal is heard as a name is and
+  bound as a word-map pattern (a separate lexicon would be a lookup table beside the network).
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
   most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
   recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
@@ -576,7 +578,9 @@ class Agent(nn.Module):
         if named.any():
             # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
             # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
-            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
+            # each stored object's own match (hub.object_match, as `ObjectHub.match` reads it): the mean over an
+            # assembly of the hub's activity counts neurons it shares with better-matching objects (beyond 10)
+            score = self.hub.object_match(acts, self.cue_present(present))
             best, i = score.max(-1)
             same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
             new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
