@@ -25,6 +25,12 @@ Choices the paper leaves open, made here:
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
   object, the assembly they name retro-activates the maps and is anticipated from memory.
+- Goals in words: the teacher's goal phrase ("reach the green ball") is heard through the word map and drives the
+  body hub's goal state (`hear_goal`); that state, with the body's present state (the ball out of reach), cues the
+  episodic memory through the body rows (`goal_recall`), and what the goal needs is read from the episodes it
+  brings back (train.trials.needed_cm3). A phrase without the goal's words is no goal the agent knows: no recall.
+  The goal words join the word map's vocabulary, not a lexicon of their own, so a goal is heard as a name is and
+  bound as a word-map pattern (a separate lexicon would be a lookup table beside the network).
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is
   most like went the same way, and the two differ in at most one property. Anything else is encoded: nothing
   recalled (the paper's episode 1), a contradiction (episode 3), or a different object that happened to end the
@@ -34,13 +40,13 @@ Choices the paper leaves open, made here:
 from __future__ import annotations
 
 import math
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 
 import torch
 from torch import nn
 
-from .encoders import (PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder, default_map_configs,
-                       encode_words, train_property_maps, word_activity)
+from .encoders import (FUNCTION_WORDS, GOAL_WORDS, PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder,
+                       default_map_configs, encode_words, train_property_maps, unknown_words, word_activity)
 from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode, _relative
 from .memory import EpisodicMemory, MemoryConfig
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
@@ -140,6 +146,9 @@ class AgentConfig:
     # 3 words), one with a word in place of another 0.67) to be taken as naming it; below, the answer is "no object
     # I know", not a guess. So "blue cylinder" names the blue heavy cylinder and "light blue cube" no yellow cube.
     imagine_floor: float = 0.75
+    # `hear_goal`: a phrase names the goal when it drives the goal state at least this much, i.e. holds both goal
+    # words (drive = the fraction of them heard): "reach" alone names nothing to reach, "the ball" no action on it
+    goal_floor: float = 0.75
     seed: int = 0
 
     def __post_init__(self):
@@ -182,6 +191,19 @@ class Imagination:
 
 
 @dataclass
+class Goal:
+    """A goal phrase as heard (leading dim B)."""
+    known: torch.Tensor      # (B,) bool: the phrase names the goal (drive >= AgentConfig.goal_floor)
+    drive: torch.Tensor      # (B,) the goal state's drive from the word map: the fraction of the goal's words heard
+    cue: torch.Tensor        # (B, 2, cols) the body rows' cue: the present state (ball out of reach), the goal x drive
+
+
+GOAL_STATE = "goal_reached"      # the body hub's state the goal words name
+GOAL_START = "goal_unreachable"  # the body's state when a goal is issued: the ball out of reach (motion planner)
+BODY_ROWS = (ROW_BODY_START, ROW_BODY_END)
+
+
+@dataclass
 class EpisodeStep:
     """What happened in one episode for each of the B agents (all tensors have leading dim B)."""
     expected: torch.Tensor   # (B,) float, NaN where nothing was recalled
@@ -197,6 +219,14 @@ class EpisodeStep:
         rank = torch.tensor([0, 3, 2, 1])[self.fired]          # S < U < G < E
         best = rank.max(dim=1).values
         return torch.tensor([STATUS_QUO, UNCERTAINTY, GROWTH, ELIMINATION])[best]
+
+
+def _check_words(phrase: str) -> None:
+    """ValueError (one line) naming the words of `phrase` the agent does not know, or saying it has none."""
+    unknown, tokens = unknown_words(phrase), phrase.lower().replace("_", " ").split()
+    if unknown or not tokens:
+        what = f"unknown word(s) {', '.join(map(repr, unknown))}" if tokens else "no words given"
+        raise ValueError(f"{what}; the words I know: {' '.join(VOCABULARY + FUNCTION_WORDS)}")
 
 
 class Agent(nn.Module):
@@ -390,11 +420,7 @@ class Agent(nn.Module):
         if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
             raise ValueError(f"words must be a phrase or {B} phrases")
         for phrase in phrases:
-            tokens = phrase.lower().replace("_", " ").split()
-            unknown = [w for w in tokens if w not in VOCABULARY]
-            if unknown or not tokens:
-                what = f"unknown word(s) {', '.join(map(repr, unknown))}" if tokens else "no words given"
-                raise ValueError(f"{what}; the words I know: {' '.join(VOCABULARY)}")
+            _check_words(phrase)
         w = list(self.maps).index(WORD_MAP)
         score = self.name_match(word_activity(self.maps[WORD_MAP], encode_words(phrases)))   # (B, max_assemblies)
         top = score.topk(min(2, score.shape[1]), dim=-1)
@@ -409,6 +435,40 @@ class Agent(nn.Module):
         a = self.anticipate_acts(retro, seen)
         a.expected = torch.where(known, a.expected, torch.full_like(a.expected, float("nan")))
         return Imagination(known, best, runner_up, retro, self.decode(retro), a)
+
+    @torch.no_grad()
+    def hear_goal(self, words) -> Goal:
+        """The teacher issues a goal in words (a phrase, or B phrases). The word map hears it, and its activity a
+        drives the body hub's goal state by the object hub's drive rule, d = a . W / W . W clamped to [0, 1], with
+        W the word map's activity for the goal words (GOAL_WORDS, bound to the state): each word's pattern has
+        unit length, so d is the fraction of the goal's words heard ("reach the green ball": 1, "reach": 1/2).
+        ValueError (one line) for a word outside the vocabulary: an unknown word is not guessed at."""
+        B = self.batch
+        phrases = [words] * B if isinstance(words, str) else list(words)
+        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
+            raise ValueError(f"words must be a phrase or {B} phrases")
+        for phrase in phrases:
+            _check_words(phrase)
+        som = self.maps[WORD_MAP]
+        heard = word_activity(som, encode_words(phrases))                                 # (B, U_word)
+        bound = word_activity(som, encode_words([" ".join(GOAL_WORDS)]))[0]               # (U_word,)
+        drive = ((heard @ bound) / (bound @ bound)).clamp(0.0, 1.0)
+        cue = torch.stack([self.body.encode([GOAL_START] * B).float(),
+                           self.body.encode([GOAL_STATE] * B).float() * drive[:, None]], 1)
+        return Goal(drive >= self.config.goal_floor, drive, cue)
+
+    @torch.no_grad()
+    def goal_recall(self, goal: Goal):
+        """The episodes a heard goal brings back (memory.Recall, strongest first): the stored sheets seen through a
+        second view of the memory whose cue rows are the body hub's (BODY_ROWS, the cue as given). An episode that
+        reached the goal holds the whole cue (strength 1), one that started from the same state and missed it half
+        (the goal row unmatched); every episode the cue touches comes back (max_recalls = the episodes stored).
+        Agents whose phrase names no goal recall nothing."""
+        cfg = replace(self.config.memory, cue_rows=BODY_ROWS, cue_power=1.0)
+        view = type(self.memory)(replace(cfg, max_episodes=1), batch=self.batch)
+        view.patterns, view.count = self.memory.patterns, self.memory.count      # the same stored sheets
+        cue = goal.cue * goal.known[:, None, None].to(goal.cue.dtype)
+        return view.recall(cue.flatten(1), max_recalls=max(1, int(self.memory.count.max())))
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
@@ -536,7 +596,9 @@ class Agent(nn.Module):
         if named.any():
             # a stored object it matches (the rules may have made a pathway too weak to tell them apart: a blue
             # cylinder like a red one once colour is irrelevant) is the same object only if it has the same name
-            score = self.hub.assembly_activity(self.hub.bottom_up(acts, self.cue_present(present)))
+            # each stored object's own match (hub.object_match, as `ObjectHub.match` reads it): the mean over an
+            # assembly of the hub's activity counts neurons it shares with better-matching objects (beyond 10)
+            score = self.hub.object_match(acts, self.cue_present(present))
             best, i = score.max(-1)
             same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
             new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))

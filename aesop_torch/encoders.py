@@ -11,7 +11,7 @@ Each measurement is turned into the input of one map:
            one length for how big the object is, as the paper's size; the largest extent alone would call a thin
            rod as big as a cube of the same height
   weight = log(mass) normalised to [0, 1] over mass_min_g..mass_max_g               (1-d)
-  word   = bag of words over a fixed vocabulary, scaled to unit length              (20-d); the word map hears
+  word   = bag of words over a fixed vocabulary, scaled to unit length              (22-d); the word map hears
            the words one at a time: its activity for a phrase is the sum of each word's own activity pattern, each
            scaled to unit length (`word_activity`), so every word of a name counts once however many units it has
 Log scales because perception of size and weight is roughly logarithmic (Weber's law) and the objects span more
@@ -40,7 +40,12 @@ MAP_NAMES = PROPERTIES + (WORD_MAP,)
 COLOR_WORDS = ("red", "green", "blue", "yellow", "orange", "purple", "white", "black", "grey")
 SHAPE_WORDS = ("cylinder", "cube", "sphere", "box")
 ADJECTIVES = ("large", "small", "heavy", "light", "medium", "tall", "short")
-VOCABULARY = COLOR_WORDS + SHAPE_WORDS + ADJECTIVES
+# the teacher's goal, "reach the green ball": its verb and its object join the vocabulary, so a goal is heard through
+# the word map like a name (agent.GOAL_WORDS binds them to the body hub's goal state)
+GOAL_WORDS = ("reach", "ball")
+VOCABULARY = COLOR_WORDS + SHAPE_WORDS + ADJECTIVES + GOAL_WORDS
+# heard and let pass: they name nothing, so they have no place on the word map
+FUNCTION_WORDS = ("the", "a")
 SHAPE_FILL = {"cylinder": math.pi / 4, "cube": 1.0, "sphere": math.pi / 6, "box": 1.0}  # volume / bounding box
 
 
@@ -86,6 +91,11 @@ def word_activity(som, words: torch.Tensor) -> torch.Tensor:
     table = som.activity(torch.eye(V, device=words.device))                       # (V, U): each word alone
     table = table / table.norm(dim=-1, keepdim=True).clamp_min(1e-12)
     return (words > 0).to(table.dtype) @ table
+
+
+def unknown_words(phrase: str) -> list[str]:
+    """The words of a phrase (split on spaces and underscores) that are neither in VOCABULARY nor FUNCTION_WORDS."""
+    return [w for w in phrase.lower().replace("_", " ").split() if w not in VOCABULARY + FUNCTION_WORDS]
 
 
 def encode_words(text, vocabulary: tuple = VOCABULARY) -> torch.Tensor:
@@ -199,7 +209,7 @@ def default_map_configs() -> dict[str, SOMConfig]:
       11.5 vs 5 cm are 5 units apart.
     - weight 1x30 over log mass: a unit per factor 1.29 in mass, sigma = the spacing; 14, 90, 420 g are 7 and
       6 units apart.
-    - word 8x8 over the 20 words (one-hot): every word gets units of its own (20 distinct winners in seeds 0-3),
+    - word 8x8 over the 22 words (one-hot): every word gets units of its own (22 distinct winners in seeds 0-5),
       ~3 each; two words are 1.41 apart, so sigma 0.4 gives a word ~0.002 on another's units (the ordering
       phase is what separates them). Phrases are read word by word (`word_activity`).
     1-d data get 1-d maps (a line cannot fold). The radius starts at about a quarter of the map's longest side.

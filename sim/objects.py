@@ -62,7 +62,9 @@ MAX_DIGITS = 32              # digits of an integer literal; a 400-digit mass wo
 OBJECT_KEYS = {"name", "shape", "color", "dims_cm", "mass_g"}
 JAR_KEYS = {"inner_diameter_cm", "height_cm", "water_depth_cm"}
 TOP_KEYS = {"jar", "train", "probe", "pool", "trials"}
-TRIAL_KEYS = {"stand"}
+TRIAL_KEYS = {"stand", "goal"}
+DEFAULT_GOAL = "reach the green ball"   # the paper's goal: what the teacher says when a trial names none
+MAX_GOAL_CHARS = 200         # a goal is a short phrase; this bounds the error line that quotes it
 MAX_STAND = 8                # objects on the stand of one goal trial: the exact random baseline enumerates subsets
 
 
@@ -176,12 +178,15 @@ class ObjectSpec:
 @dataclass(frozen=True)
 class ObjectSet:
     """A validated objects file: the jar, the objects dropped one per episode (train), the ones only lifted (probe),
-    and for goal trials (sim/trial.py) objects used only there (pool) and the trials, each the names on the stand."""
+    and for goal trials (sim/trial.py) objects used only there (pool) and the trials, each the names on the stand,
+    with per trial the teacher's goal phrase (goals: words in lower case, or None for DEFAULT_GOAL; empty: all
+    default)."""
     jar: JarSpec
     train: list[ObjectSpec]
     probe: list[ObjectSpec] = field(default_factory=list)
     pool: list[ObjectSpec] = field(default_factory=list)
     trials: list[tuple[str, ...]] = field(default_factory=list)
+    goals: list[str | None] = field(default_factory=list)
 
     def get(self, name: str) -> ObjectSpec:
         for o in self.train + self.probe + self.pool:
@@ -198,7 +203,8 @@ class ObjectSet:
         if self.pool:
             out["pool"] = [o.to_dict() for o in self.pool]
         if self.trials:
-            out["trials"] = [{"stand": list(t)} for t in self.trials]
+            goals = self.goals or [None] * len(self.trials)
+            out["trials"] = [{"stand": list(t), **({"goal": g} if g else {})} for t, g in zip(self.trials, goals)]
         return out
 
 
@@ -296,15 +302,16 @@ def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
             raise ObjectsFileError(f"object '{o.name}' field 'name': duplicate name (train, probe and pool names "
                                    f"must all differ)")
         seen.add(o.name)
-    return ObjectSet(jar, groups["train"], groups["probe"], groups["pool"], _parse_trials(data.get("trials", []),
-                                                                                         seen))
+    trials, goals = _parse_trials(data.get("trials", []), seen)
+    return ObjectSet(jar, groups["train"], groups["probe"], groups["pool"], trials, goals)
 
 
-def _parse_trials(items, names: set) -> list[tuple[str, ...]]:
-    """`trials`: a list of {"stand": [names]}, 1 to MAX_STAND distinct objects of train, probe or pool each."""
+def _parse_trials(items, names: set) -> tuple[list[tuple[str, ...]], list[str | None]]:
+    """`trials`: a list of {"stand": [names], "goal": phrase}, 1 to MAX_STAND distinct objects of train, probe or
+    pool each, and optionally the teacher's goal (`_parse_goal`). Returns the stands and the goals."""
     if not isinstance(items, list):
-        raise ObjectsFileError("'trials' must be a list of {\"stand\": [names]}")
-    trials = []
+        raise ObjectsFileError("'trials' must be a list of {\"stand\": [names], \"goal\": phrase}")
+    trials, goals = [], []
     for i, t in enumerate(items):
         where = f"trials[{i}]"
         if not isinstance(t, dict):
@@ -320,7 +327,29 @@ def _parse_trials(items, names: set) -> list[tuple[str, ...]]:
         if len(set(stand)) != len(stand):
             raise ObjectsFileError(f"{where} field 'stand': an object is listed twice")
         trials.append(tuple(stand))
-    return trials
+        goals.append(_parse_goal(t["goal"], where) if "goal" in t else None)
+    return trials, goals
+
+
+def _parse_goal(goal, where: str) -> str | None:
+    """A trial's goal phrase: words the agent knows (aesop_torch.encoders: the vocabulary and a few function words),
+    among them the goal's own (GOAL_WORDS: "reach" and "ball"); anything else is no goal the robot could be given
+    (the agent's Agent.hear_goal says the same: the goal is heard when both its words are). Lower case, one space
+    between words; None when it is the default goal."""
+    from aesop_torch.encoders import FUNCTION_WORDS, GOAL_WORDS, VOCABULARY, unknown_words
+    at = f"{where} field 'goal'"
+    if not isinstance(goal, str) or not goal.strip() or len(goal) > MAX_GOAL_CHARS:
+        shown = json.dumps(goal if not isinstance(goal, str) or len(goal) <= 40 else goal[:40] + "...")
+        raise ObjectsFileError(f"{at}: must be a phrase of 1 to {MAX_GOAL_CHARS} characters, not {shown}")
+    if unknown := unknown_words(goal):
+        raise ObjectsFileError(f"{at}: unknown word(s) {', '.join(map(repr, unknown))} (the words I know: "
+                               f"{' '.join(VOCABULARY + FUNCTION_WORDS)})")
+    words = goal.lower().replace("_", " ").split()
+    if not set(GOAL_WORDS) <= set(words):
+        raise ObjectsFileError(f"{at}: {json.dumps(goal)} is no goal I know: I can reach the ball (a goal says "
+                               f"{' and '.join(map(repr, GOAL_WORDS))}, e.g. {json.dumps(DEFAULT_GOAL)})")
+    phrase = " ".join(words)
+    return None if phrase == DEFAULT_GOAL else phrase
 
 
 def _no_unknown_keys(d: dict, allowed: set, where: str):

@@ -86,9 +86,10 @@ def test_summary_contract(paper_run):
     assert "order_independent: undefined (one order)" in stdout and str(out) in stdout
     # the goal trial, by hand: the 400 g cylinder (expected like the heavy one) alone makes the ball reachable
     (t,) = summary["runs"][0]["trials"]
-    assert set(t) == {"stand", "chosen", "expected_cm3", "observed_cm3", "drops", "goal_reached", "fewest_drops",
+    assert set(t) == {"goal", "stand", "chosen", "expected_cm3", "observed_cm3", "drops", "goal_reached", "fewest_drops",
                       "random_drops_mean", "excess_drops", "first_choice_optimal", "expected_drops",
                       "recall_strength", "agreeing_episodes", "explored"}
+    assert t["goal"] == "reach the green ball"                # the teacher's default goal
     assert t["stand"] == ["red_light_cylinder", "purple_heavy_cylinder"] and t["chosen"] == ["purple_heavy_cylinder"]
     assert t["expected_cm3"][0] == pytest.approx(365, rel=0.05) and t["explored"] == [False]
     assert t["observed_cm3"][0] == pytest.approx(365.3, rel=0.02) and t["goal_reached"]

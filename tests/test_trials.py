@@ -3,6 +3,7 @@ form and physics), the objects file's trials, and the word path (names bound in 
 
 import itertools
 import math
+import re
 
 import pytest
 import torch
@@ -209,3 +210,107 @@ def test_ask_cli(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and "'elephant'" in r.stderr and not r.stdout
     r = subprocess.run([*ask[:2], str(tmp_path / "nope.pt"), "red cube"], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and r.stderr.count("\n") == 1
+
+
+# -- the goal in words --------------------------------------------------------------------------------------------
+
+def _two_episodes(explored):
+    """A fresh agent (the explored one's maps) that remembers two drops: a 300 cm^3 one that made the ball reachable
+    and a 100 cm^3 one that did not (two different objects, so each has its own assembly)."""
+    exp, _, outcomes = explored
+    agent = Agent(exp.config, batch=1, develop=False)
+    agent.maps = exp.agent.maps
+    for name, cm3, reached in (("red_heavy_cylinder", 300.0, True), ("green_heavy_box", 100.0, False)):
+        agent.remember(stack_measurements([outcomes[name]["measurement"]]), torch.tensor([cm3]),
+                       torch.tensor([False]), torch.tensor([reached]), sank=torch.tensor([True]))
+    return agent
+
+
+def test_the_goal_phrase_drives_the_goal_state_word_by_word(explored):
+    agent = explored[0].agent
+    # the drive is the fraction of the goal's two words heard (each word's pattern has unit length on the word map,
+    # and two words' patterns barely overlap: 0.002 on a fully developed map, a few hundredths on this test's
+    # quickly trained one): both 1, one 1/2, none 0; other and function words take nothing away
+    drive = lambda p: float(agent.hear_goal(p).drive[0])
+    assert drive("reach the green ball") == pytest.approx(1.0, abs=1e-6)
+    assert drive("ball reach") == pytest.approx(1.0, abs=1e-6)
+    assert drive("reach the cube") == pytest.approx(0.5, abs=0.05)
+    assert drive("green box") == pytest.approx(0.0, abs=0.05)
+    goal = agent.hear_goal("reach the green ball")
+    assert bool(goal.known[0]) and not bool(agent.hear_goal("reach the cube").known[0])
+    # the cue: the present state (ball out of reach) on the first body row, the goal state x drive on the last
+    assert torch.equal(goal.cue[0].bool(), torch.stack([agent.body.encode("goal_unreachable"),
+                                                        agent.body.encode("goal_reached")]))
+    with pytest.raises(ValueError, match="unknown word.*'fetch'.*the words I know: red .* reach ball the a"):
+        agent.hear_goal("fetch the green ball")
+
+
+def test_the_goal_recalls_the_episodes_that_reached_it_and_the_need_lies_between(explored):
+    agent = _two_episodes(explored)
+    recall = agent.goal_recall(agent.hear_goal("reach the green ball"))
+    rewards = agent.reward.decode(agent._reward_row(recall.episodes))[0]
+    # by hand: the episode that reached the goal holds the whole cue (4 of 4 neurons), the other only the start
+    # state (2 of 4); both are brought back, exactly as stored, strongest first
+    assert recall.valid[0].tolist()[:2] == [True, True] and recall.strength[0, :2].tolist() == [1.0, 0.5]
+    assert rewards[:2].tolist() == pytest.approx([300.0, 100.0], rel=0.007)      # the reward code's 0.7 %
+    assert torch.equal(recall.episodes[0, :2].sort(0).values, agent.memory.patterns[0, :2].sort(0).values)
+    # the need: midway between the recalled miss and the recalled reach, (100 + 300) / 2
+    assert float(needed_cm3(agent)[0]) == pytest.approx(200.0, rel=0.007)
+    # a phrase without the goal's words recalls nothing and is answered, not guessed
+    assert not bool(agent.goal_recall(agent.hear_goal("red heavy cylinder")).any[0])
+    with pytest.raises(ValueError, match="'green box' is no goal I know"):
+        needed_cm3(agent, "green box")
+
+
+def test_only_the_goal_reached_sets_the_need(explored):
+    # one drop that reached the goal (300) and none that missed below it: the need is that reward itself
+    exp, _, outcomes = explored
+    agent = Agent(exp.config, batch=1, develop=False)
+    agent.maps = exp.agent.maps
+    agent.remember(stack_measurements([outcomes["red_heavy_cylinder"]["measurement"]]), torch.tensor([300.0]),
+                   torch.tensor([False]), torch.tensor([True]))
+    assert float(needed_cm3(agent)[0]) == pytest.approx(300.0, rel=0.007)
+    assert math.isinf(float(needed_cm3(Agent(exp.config, batch=1, develop=False))[0]))   # nothing recalled
+
+
+def test_objects_file_goal():
+    trial = {"stand": ["blue_light_cylinder", "blue_heavy_cylinder"]}
+    objs = parse_objects({**OBJECTS, "trials": [trial, {**trial, "goal": "Reach the  BALL"},
+                                                {**trial, "goal": "reach the green ball"}]})
+    # lower case, one space; the default goal is no goal given (the same experiment)
+    assert objs.goals == [None, "reach the ball", None]
+    assert objs.canonical()["trials"][1] == {**trial, "goal": "reach the ball"} and "goal" not in \
+        objs.canonical()["trials"][2]
+    for goal, words in [("fetch the ball", "unknown word(s) 'fetch' (the words I know: red green"),
+                        ("green box", '"green box" is no goal I know'), ("reach the cube", "no goal I know"),
+                        (3, "must be a phrase"), ("  ", "must be a phrase")]:
+        with pytest.raises(ObjectsFileError, match=re.escape("trials[0] field 'goal': ") + ".*" + re.escape(words)):
+            parse_objects({**OBJECTS, "trials": [{**trial, "goal": goal}]})
+
+
+def test_run_trials_records_the_goal_and_refuses_one_it_does_not_know(explored):
+    exp, objs, outcomes = explored
+    stand = objs.trials[0]
+    arch = {n: archimedes_cm3(objs.get(n), objs.jar) for n in stand}
+    meas = {n: outcomes[n]["measurement"] for n in stand}
+    drop = closed_form_drop(outcomes, reach_cm3(objs.jar))
+    (rec,), = run_trials(roomy_copy(exp.agent, 2), [stand], meas, drop, objs.jar, arch, goals=["reach the ball"])
+    assert rec["goal"] == "reach the ball" and rec["chosen"] == ["blue_heavy_cylinder"]
+    with pytest.raises(ValueError, match="'red cube' is no goal I know"):
+        run_trials(roomy_copy(exp.agent, 2), [stand], meas, drop, objs.jar, arch, goals=["red cube"])
+
+
+def test_run_cli_refuses_an_unknown_goal_word_and_writes_nothing(tmp_path):
+    import json
+    import subprocess
+    import sys
+    from pathlib import Path
+    root = Path(__file__).resolve().parents[1]
+    data = {**OBJECTS, "trials": [{"stand": ["blue_light_cylinder"], "goal": "fetch the green ball"}]}
+    f, out = tmp_path / "objects.json", tmp_path / "out"
+    f.write_text(json.dumps(data))
+    r = subprocess.run([sys.executable, str(root / "train" / "run.py"), "--objects", str(f), "--out", str(out)],
+                       capture_output=True, text=True, timeout=120)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and not r.stdout, r.stderr
+    assert "trials[0] field 'goal': unknown word(s) 'fetch'" in r.stderr and "reach ball the a" in r.stderr
+    assert not out.exists()

@@ -6,13 +6,17 @@ between drops. Each of the B agents (one per order) plays the trial on its own:
   choose, drop it, read the rise, apply the rules and encode (Agent.step: learning stays on, a surprise teaches),
   and repeat until the ball is reachable or the stand is empty.
 
-The choice comes from the model, never from the answer. The agent's own estimate of the rise it needs is read from
-its episodic memory: the displacements that did and did not make the ball reachable (each episode stores the body
-state after the drop). The choice is the candidate with the fewest expected drops to close the remaining gap
-(1 if its anticipated displacement closes it, else 1 + the fewest of the rest), ties to the largest anticipated
-displacement; with no estimate of the need yet, simply the largest. An agent that recalls nothing for any candidate
-(a novice) explores: a random choice from a generator seeded by the run's seed and the trial. How sure each
-anticipation is goes into the record: the strongest recall's strength and how many recalled episodes agree with it.
+The choice comes from the model, never from the answer. The teacher issues the goal in words (default
+DEFAULT_GOAL, or the trial's own phrase): heard through the word map, it drives the body hub's goal state, which
+cues the episodic memory through the body rows (Agent.hear_goal, Agent.goal_recall), and the agent's estimate of the
+rise the goal needs is read from the episodes that come back: the displacements that did and did not make the ball
+reachable (each episode stores the body state after the drop). A phrase that names no goal the agent knows is
+refused (ValueError, one line): the agent does not try what it was not asked. The choice is the candidate with the
+fewest expected drops to close the remaining gap (1 if its anticipated displacement closes it, else 1 + the fewest
+of the rest), ties to the largest anticipated displacement; with no estimate of the need yet, simply the largest.
+An agent that recalls nothing for any candidate (a novice) explores: a random choice from a generator seeded by the
+run's seed and the trial. How sure each anticipation is goes into the record: the strongest recall's strength and
+how many recalled episodes agree with it.
 
 Trials run after the exploration, on a copy of each agent with room for the trials' episodes and objects: the
 run's checkpoint stays the state after the exploration, and the trials are a function of it (a resumed run plays
@@ -25,8 +29,10 @@ import math
 
 import torch
 
-from aesop_torch.agent import ROW_BODY_END, Agent
+from aesop_torch.agent import GOAL_STATE, ROW_BODY_END, Agent
+from aesop_torch.encoders import GOAL_WORDS
 from aesop_torch.rules import contradiction
+from sim.objects import DEFAULT_GOAL
 from sim.trial import fewest_drops, optimal_first, random_drops_mean, reach_cm3
 from train.experiment import stack_measurements
 
@@ -51,17 +57,20 @@ def roomy_copy(agent: Agent, extra: int) -> Agent:
     return new
 
 
-def needed_cm3(agent: Agent) -> torch.Tensor:
-    """(B,) the displacement each agent expects the goal to need, from its memory alone: midway between the largest
-    stored displacement that left the ball out of reach and the smallest that made it reachable (only the latter if
-    none failed below it); inf where no stored drop ever reached the ball (the agent does not know yet)."""
-    mem = agent.memory
-    sheets = mem.patterns                                                       # (B, M, rows, cols)
-    stored = torch.arange(sheets.shape[1])[None] < mem.count[:, None]           # (B, M)
-    reward = agent.reward.decode(agent._reward_row(sheets))                     # (B, M), NaN if invalid
-    goal = agent.body.encode("goal_reached")
-    reached = (sheets[:, :, ROW_BODY_END] == goal).all(-1) & stored & ~torch.isnan(reward)
-    missed = ~(sheets[:, :, ROW_BODY_END] == goal).all(-1) & stored & ~torch.isnan(reward)
+def needed_cm3(agent: Agent, goal: str = DEFAULT_GOAL) -> torch.Tensor:
+    """(B,) the displacement each agent expects the goal to need, from the episodes the goal phrase recalls
+    (Agent.goal_recall): midway between the largest recalled displacement that left the ball out of reach and the
+    smallest that made it reachable (only the latter if none failed below it); inf where no recalled drop reached
+    the ball (the agent does not know yet). ValueError (one line) if the phrase names no goal the agent knows."""
+    heard = agent.hear_goal(goal)
+    if not bool(heard.known.all()):
+        raise ValueError(f"{goal!r} is no goal I know: I can reach the ball (a goal says "
+                         f"{' and '.join(map(repr, GOAL_WORDS))})")
+    recall = agent.goal_recall(heard)
+    reward = agent.reward.decode(agent._reward_row(recall.episodes))            # (B, K), NaN if not valid
+    ok = recall.valid & ~torch.isnan(reward)
+    holds = (recall.episodes[:, :, ROW_BODY_END] == agent.body.encode(GOAL_STATE)).all(-1)
+    reached, missed = ok & holds, ok & ~holds
     inf = torch.full_like(reward, math.inf)
     hi = torch.where(reached, reward, inf).amin(-1)                             # (B,)
     lo = torch.where(missed & (reward < hi[:, None]), reward, -inf).amax(-1)
@@ -95,28 +104,34 @@ def choose(expected: list[float], gap: float, generator: torch.Generator) -> tup
 
 
 def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar, archimedes: dict, seed: int = 0,
-               names: bool = True) -> list[list[dict]]:
+               names: bool = True, goals: list[str | None] | None = None) -> list[list[dict]]:
     """Play every trial in turn with each of the agent's B agents (learning on, carried from trial to trial).
 
     stands: per trial the names on the stand. measurements: name -> plain measurement (the candidate lifted and
     weighed). drop(b, sequence) -> {"observed_cm3", "goal_before", "goal_after", "sank"[, "measurement"]}: what the
     world reports for the last drop of `sequence` (agent b's drops so far in this trial, in order). archimedes:
     name -> true displacement, for the planner and the random chooser only. names: the teacher names each object
-    as it is presented (its name as words). Returns per agent the list of trial records (CONTRACTS.md)."""
+    as it is presented (its name as words). goals: per trial the teacher's goal phrase (None: DEFAULT_GOAL); a
+    phrase that names no goal is refused (ValueError) before any trial is played. Returns per agent the list of
+    trial records (CONTRACTS.md)."""
     B = agent.batch
-    # read once, before the trials: a trial's later drops start from a raised level, so the goal state stored with
-    # them does not tell what rise one drop from the start level needs
-    need = needed_cm3(agent)
+    goals = [g or DEFAULT_GOAL for g in (goals or [None] * len(stands))]
+    if len(goals) != len(stands):
+        raise ValueError(f"{len(goals)} goals for {len(stands)} trials")
+    # each goal heard and recalled once, before the trials: a trial's later drops start from a raised level, so the
+    # goal state stored with them does not tell what rise one drop from the start level needs
+    needs = {g: needed_cm3(agent, g) for g in dict.fromkeys(goals)}
     goal_cm3 = reach_cm3(jar)
     records = [[] for _ in range(B)]
     tol = agent.config.rules
     for i, stand in enumerate(stands):
+        need = needs[goals[i]]
         g = torch.Generator().manual_seed((seed * 1_000_003 + TRIAL_SEED + i) % (2 ** 63))
         left = [list(stand) for _ in range(B)]
         seq = [[] for _ in range(B)]
         total = [0.0] * B
-        rec = [{"stand": list(stand), "chosen": [], "expected_cm3": [], "observed_cm3": [], "recall_strength": [],
-                "agreeing_episodes": [], "expected_drops": [], "explored": []} for _ in range(B)]
+        rec = [{"goal": goals[i], "stand": list(stand), "chosen": [], "expected_cm3": [], "observed_cm3": [],
+                "recall_strength": [], "agreeing_episodes": [], "expected_drops": [], "explored": []} for _ in range(B)]
         active = [True] * B
         while any(active):
             # anticipate every candidate on the stand, all agents at once (each agent's own candidates)
@@ -176,7 +191,7 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
             r["random_drops_mean"] = round(random_drops_mean(volumes, goal_cm3), 4)
             r["excess_drops"] = r["drops"] - best
             r["first_choice_optimal"] = bool(first_ok[stand.index(r["chosen"][0])])
-            records[b].append({k: r[k] for k in ("stand", "chosen", "expected_cm3", "observed_cm3", "drops",
+            records[b].append({k: r[k] for k in ("goal", "stand", "chosen", "expected_cm3", "observed_cm3", "drops",
                                                  "goal_reached", "fewest_drops", "random_drops_mean", "excess_drops",
                                                  "first_choice_optimal", "expected_drops", "recall_strength",
                                                  "agreeing_episodes", "explored")})
@@ -227,7 +242,8 @@ def play_trials(exp, objects, world_trials=None, progress=None) -> list[list[dic
                 progress(sequence)
             return out
 
-        return run_trials(agent, objects.trials, measurements, drop, objects.jar, archimedes, seed=exp.seed)
+        return run_trials(agent, objects.trials, measurements, drop, objects.jar, archimedes, seed=exp.seed,
+                          goals=objects.goals)
     finally:
         if own:
             world.close()
