@@ -247,3 +247,37 @@ def test_state_dict_round_trip_and_device():
     moved = copy.to(torch.device("cpu"))
     q = cue((B, 0.75), (A, 0.5))
     assert all(torch.equal(x, y) for x, y in zip(mem.recall(q), moved.recall(q)))
+
+
+def test_capacity_of_a_small_sheet_by_hand():
+    """A 2 x 4 sheet, one neuron per row (row_k 1): an object row (the cue) and a reward row. Its capacity for
+    exact recall is 4 episodes, one per object neuron. By hand, for 4 episodes pairing object i with reward pi(i):
+    every neuron has p = 1/4, sigma^2 = 3/16, and the z-scored weight from object i to reward j is
+    sum_mu y_mu,i y_mu,j = (3/4 * 3/4 + 3 * 1/4 * 1/4) / (3/16) = 4 when j = pi(i) (the episode they share) and
+    (2 * -3/4 * 1/4 + 2 * 1/16) / (3/16) = -4/3 otherwise: the cue drives its own reward alone. A fifth episode has
+    no object neuron of its own: sharing object 0 with the first, its cue is the first's, which recalls both
+    episodes, each with the whole cue (strength 1), so neither is told apart by its object any more."""
+    pi = (2, 0, 3, 1)
+    cfg = dict(rows=2, cols=4, row_k=(1, 1), cue_rows=(0,), max_episodes=5, max_recalls=4)
+
+    def ep(obj, reward):
+        x = torch.zeros(2, 4, dtype=torch.bool)
+        x[0, obj] = x[1, reward] = True
+        return x[None]
+
+    mem = EpisodicMemory(MemoryConfig(**cfg))
+    for i, j in enumerate(pi):
+        mem.store(ep(i, j))
+    J = mem.weights(0).view(2, 4, 2, 4)[0, :, 1, :]             # object neuron i -> reward neuron j
+    expected = torch.full((4, 4), -4 / 3, dtype=J.dtype)
+    expected[torch.arange(4), torch.tensor(pi)] = 4.0
+    assert torch.allclose(J, expected)
+    cues = torch.eye(4)                                          # each object neuron alone
+    out = mem.recall(cues)
+    assert out.valid[:, 0].all() and (out.valid[:, 1:].sum(1) == 0).all()
+    for i, j in enumerate(pi):
+        assert torch.equal(out.episodes[i, 0], ep(i, j)[0])
+    mem.store(ep(0, 3))                                          # a fifth: object 0 again, another reward
+    out = mem.recall(cues[:1])
+    got = {int(e[1].nonzero()) for e, v in zip(out.episodes[0], out.valid[0]) if v}
+    assert got == {pi[0], 3} and out.strength[0, :2].tolist() == pytest.approx([1.0, 1.0])
