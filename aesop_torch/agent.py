@@ -19,7 +19,11 @@ Choices the paper leaves open, made here:
   by what became of their objects (floated or sank); within each, the log reward is fitted as a linear function of
   the properties dominant in that context (weighted least squares, weights = recall strength), and read at the
   present object's values. Size enters as the volume the object fills (fill x size^3, `as_volume`), so shape and
-  size followed together are one slope, not two. Which fit applies, when both exist, comes from the recalled fates too: a logistic
+  size followed together are one slope, not two. Of the properties a context follows, the fit uses the one that
+  explains its recalled rewards best (least residual variance per degree of freedom), all of them only where too
+  few episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one
+  does, and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line
+  (the default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which fit applies, when both exist, comes from the recalled fates too: a logistic
   boundary over the properties not known irrelevant (heavy for its size sinks), read at the present object.
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
@@ -65,25 +69,25 @@ FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 
 
 
 def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
-    """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS). The shape column
-    only where size is not followed: the readout's size column carries the fill already (`as_volume`)."""
-    cols = torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
+    """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS)."""
+    return torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
                       for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
-    shape, size = FEATURE_COLUMNS["shape"].start, FEATURE_COLUMNS["size"].start
-    cols[..., shape] &= ~cols[..., size]
-    return cols
 
 
-def as_volume(features: torch.Tensor) -> torch.Tensor:
-    """Features (..., 6) -> the readout's: the size column becomes the log of the volume the object fills, fill x
-    size^3 (size is the cube root of the bounding box). Size and shape then enter a fit as one column where both are
-    followed: with the handful of episodes a context recalls, a fit on fill and size apart has one slope too many
-    (median novel-object error after 8 episodes 21 % apart, 13 % as a volume; generated sets, tuning seeds
-    1000-1019, `python benches/generalization.py` for the bench seeds)."""
-    shape, size = FEATURE_COLUMNS["shape"].start, FEATURE_COLUMNS["size"].start
+_SHAPE, _SIZE = FEATURE_COLUMNS["shape"].start, FEATURE_COLUMNS["size"].start
+
+
+def as_volume(features: torch.Tensor, columns: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """The fit's features and columns: the size column becomes the log of the volume the object fills, fill x
+    size^3 (size is the cube root of the bounding box), and the shape column is kept only where size is not
+    followed (the volume carries the fill). Size and shape followed together are then one slope: with the handful
+    of episodes a fate has after 8 objects, a fit on fill and size apart has one slope too many (median novel-object
+    error after 8 episodes 24.6 % apart, 13.9 % as a volume; generated sets of tuning seeds 1000-1044)."""
     out = features.clone()
-    out[..., size] = features[..., shape] + 3.0 * features[..., size]
-    return out
+    out[..., _SIZE] = features[..., _SHAPE] + 3.0 * features[..., _SIZE]
+    columns = columns.clone()
+    columns[..., _SHAPE] &= ~columns[..., _SIZE]
+    return out, columns
 
 
 NAME_SAME = 0.99   # name_match of an object's own name is 1 up to float rounding; one word of 6 changed gives 0.83
@@ -345,7 +349,6 @@ class Agent(nn.Module):
         nothing was recalled. See the module docstring."""
         B, K, F = xk.shape
         dtype = x.dtype
-        x, xk = as_volume(x), as_volume(xk)
         # in float64: fits on a few episodes whose properties move together are ill-conditioned, and float32
         # rounding (which differs with the batch an agent is computed in) would move the answer by percents
         x, xk, weight = x.double(), torch.nan_to_num(xk).double(), (weight * ~torch.isnan(rewards)).double()
@@ -355,17 +358,33 @@ class Agent(nn.Module):
         dom = self.rules.dominant[:, :2]
         fallback = (self.rules.state == DOMINANT)[:, None] & ~self.rules.eliminated[:, :2]
         follow = torch.where(dom.any(-1, keepdim=True), dom, fallback)           # (B, 2, P)
-        d = (xk[:, None] - x[:, None, None]) * feature_columns(follow)[:, :, None]   # (B, 2, K, F) centred
-        A = torch.cat([torch.ones(B, 2, K, 1, dtype=d.dtype), d], -1)            # (B, 2, K, 1 + F)
+        # candidate fits per context: each followed property alone, and all of them together (the last)
+        P = follow.shape[-1]
+        alone = torch.eye(P, dtype=torch.bool).expand(B, 2, P, P) & follow[..., None, :]
+        cand = torch.cat([alone, follow[..., None, :]], 2)                        # (B, 2, P + 1, P)
+        xv, cols = as_volume((xk[:, None] - x[:, None, None])[:, :, None], feature_columns(cand)[..., None, :])
+        d = xv * cols                                                             # (B, 2, P + 1, K, F) centred
+        A = torch.cat([torch.ones(*d.shape[:-1], 1, dtype=d.dtype), d], -1)      # (B, 2, P + 1, K, 1 + F)
         ctx = torch.arange(2)[None, :, None]
         w = weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0))   # unseen fates count in both
         total = w.sum(-1)                                                         # (B, 2)
         ridge = torch.eye(1 + F, dtype=d.dtype) * self.config.readout_ridge
         ridge[0, 0] = 0.0
-        lhs = torch.einsum("bckf,bck,bckg->bcfg", A, w, A) + ridge * total[..., None, None].clamp_min(1e-12)
+        lhs = torch.einsum("bcnkf,bck,bcnkg->bcnfg", A, w, A) + ridge * total[..., None, None, None].clamp_min(1e-12)
         lhs = lhs + torch.eye(1 + F, dtype=d.dtype) * 1e-12                       # an empty context stays solvable
-        beta = torch.linalg.solve(lhs, torch.einsum("bckf,bck,bk->bcf", A, w, y))  # (B, 2, 1 + F)
-        pred = torch.where(total > 0, beta[..., 0], torch.full_like(total, float("nan")))   # (B, 2) log cm^3
+        beta = torch.linalg.solve(lhs, torch.einsum("bcnkf,bck,bk->bcnf", A, w, y))   # (B, 2, P + 1, 1 + F)
+        # the candidate that explains the recalled rewards best: least weighted residual variance per degree of
+        # freedom, among those with more episodes than parameters; all properties together only where no single
+        # one can be fitted (a fit on properties that moved together extrapolates wildly off their line)
+        res = torch.einsum("bcnkf,bcnf->bcnk", A, beta) - y[:, None, None]
+        n = (w > 0).sum(-1, keepdim=True)                                         # (B, 2, 1)
+        dof = 1 + cols[..., 0, :].sum(-1)                                         # (B, 2, P + 1)
+        var = (w[:, :, None] * res ** 2).sum(-1) / (n - dof).clamp_min(1)
+        ok = (n > dof) & torch.cat([follow, torch.zeros_like(follow[..., :1])], -1)
+        score = torch.where(ok, var, torch.full_like(var, float("inf")))
+        pick = torch.where(ok.any(-1), score.argmin(-1), torch.full_like(score[..., 0], P, dtype=torch.long))
+        pred = beta[..., 0].gather(-1, pick[..., None])[..., 0]                   # (B, 2) log cm^3
+        pred = torch.where(total > 0, pred, torch.full_like(total, float("nan")))
         both = (total > 0).all(-1)
         # which fit applies: will it float or sink? Learned from the recalled episodes' fates, a logistic boundary
         # over the properties not known irrelevant (heavy for its size sinks), read at the present object

@@ -6,7 +6,7 @@ import pytest
 import torch
 
 from aesop_torch import Agent, AgentConfig
-from aesop_torch.agent import feature_columns
+from aesop_torch.agent import as_volume, feature_columns
 from aesop_torch.rules import RULE_NAMES
 
 RED, BLUE = (0.85, 0.1, 0.1), (0.1, 0.2, 0.85)
@@ -152,8 +152,27 @@ def test_sinkers_of_another_shape_and_size_are_read_by_their_volume():
     got = agent.readout(feat(math.pi / 4, 5.0)[None], xk, y, torch.ones(1, 2, dtype=torch.long), torch.ones(1, 2))
     assert got.item() == pytest.approx(math.pi / 4 * 125.0, rel=1e-3)   # 98.2 cm^3
     # the columns: shape's own only where size is not followed
-    cols = feature_columns(torch.tensor([[False, True, True, False], [False, True, False, False]]))
+    _, cols = as_volume(torch.zeros(2, 6), feature_columns(torch.tensor([[False, True, True, False],
+                                                                         [False, True, False, False]])))
     assert cols.tolist() == [[False] * 3 + [False, True, False], [False] * 3 + [True, False, False]]
+
+
+def test_the_fit_follows_the_one_property_that_explains_the_rewards():
+    """Three floaters, both size and weight followed. They displace their mass: weight alone fits them exactly
+    (residual 0), size alone does not (the heaviest is the middle size), so the fit follows weight and reads a
+    120 g floater of a size none of them had at exactly 120."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 2] = agent.rules.dominant[0, 0, 3] = True    # floating: size and weight
+
+    def feat(size_cm, mass):
+        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass)])
+
+    floaters = [(6.0, 10.0), (7.0, 40.0), (8.0, 20.0)]
+    xk = torch.stack([feat(*f) for f in floaters])[None]
+    y = torch.tensor([[m for _, m in floaters]])
+    fates = torch.zeros(1, 3, dtype=torch.long)
+    query = feat(11.0, 120.0)[None]
+    assert agent.readout(query, xk, y, fates, torch.ones(1, 3)).item() == pytest.approx(120.0, rel=1e-3)
 
 
 def test_delta_property_sees_an_eliminated_pathway(paper):
