@@ -129,10 +129,31 @@ class Recall(NamedTuple):
 def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float) -> torch.Tensor:
     """Per-row inhibition: (..., R, C) predicted activity -> bool state, the k_r largest of row r firing if above
     threshold. Exact ties go to the lower neuron index, so the result never depends on the batch."""
-    kth = a.topk(int(row_k.max()), dim=-1).values.gather(-1, (row_k - 1).expand(*a.shape[:-2], -1)[..., None])
+    fire = a > threshold
+    k = row_k.expand(a.shape[:-1])
+    # a row with at most k_r neurons above threshold fires them all; only the others need ranking (and a row with a
+    # NaN, which the ranking puts first)
+    crowded = fire.sum(-1) > k
+    if bool(torch.isnan(a).any()):
+        crowded |= torch.isnan(a).any(-1)
+    if not bool(crowded.any()):
+        return fire
+    a, k = a[crowded], k[crowded][:, None]                  # (n, C), (n, 1)
+    kmax = int(k.max())
+    if kmax > 3 or bool(torch.isnan(a).any()):   # a sort of each row (topk ranks NaN above everything)
+        kth = a.topk(kmax, dim=-1).values.gather(-1, k - 1)
+    else:   # the k-th largest (counted with ties) by stepping down the row's distinct values
+        kth = a.amax(-1, keepdim=True)
+        for _ in range(kmax - 1):
+            short = (a >= kth).sum(-1, keepdim=True) < k
+            if not bool(short.any()):
+                break
+            below = torch.where(a < kth, a, torch.full_like(a, -torch.inf)).amax(-1, keepdim=True)
+            kth = torch.where(short, below, kth)
     above, tied = a > kth, a == kth
-    room = row_k[:, None] - above.sum(-1, keepdim=True)    # places left for neurons tied with the k-th
-    return (above | (tied & (tied.cumsum(-1) <= room))) & (a > threshold)
+    room = k - above.sum(-1, keepdim=True)    # places left for neurons tied with the k-th
+    fire[crowded] = (above | (tied & (tied.cumsum(-1) <= room))) & (a > threshold)
+    return fire
 
 
 class _Net(NamedTuple):
