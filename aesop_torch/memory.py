@@ -188,10 +188,13 @@ class _Net(NamedTuple):
     p: torch.Tensor | None = None
     inv: torch.Tensor | None = None
     gain: torch.Tensor | None = None
+    # one memory for all cues: its active neurons pattern by pattern and its patterns neuron by neuron, as the
+    # indices and bag offsets of embedding_bag (cols, starts, owners, firsts)
+    lists: tuple | None = None
 
     def take(self, i: torch.Tensor) -> "_Net":
         return _Net(self.idx if self.idx.shape[0] == 1 else self.idx[i],
-                    *(t if t is None else t[i] for t in self[1:]))
+                    *(t if t is None else t[i] for t in self[1:7]), self.lists)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
@@ -212,25 +215,27 @@ class _Net(NamedTuple):
             return net.p + net.covariance_product(d) / ((d * d).sum(1, keepdim=True) - d * d).clamp(min=_EPS)
         dz = d * net.inv
         h = net.covariance_product(dz * net.inv)                 # J (D^-1 d~); times D^-1 and sigma below: 1
-        return net.p + h * net.gain / ((dz * dz).sum(1, keepdim=True) - dz * dz).clamp(min=_EPS)
+        sq = dz * dz
+        return net.p + h * net.gain / (sq.sum(1, keepdim=True) - sq).clamp(min=_EPS)
 
     def covariance_product(self, d: torch.Tensor) -> torch.Tensor:
         """J d for d (B, N), J = sum_mu (x_mu - p)(x_mu - p)^T with a zero diagonal, over the patterns in play.
 
         X^T (X d) and the depressed states' Z^T (Z d) are gathers and scatters over the active neurons (~40 of
-        1000 in a pattern) rather than dense products."""
+        1000 in a pattern) rather than dense products; each output a sum from 0 in increasing index order."""
         S, n = self.total, self.n
         p = self.p if self.p is not None else S / n.clamp(min=1)
         B, N = d.shape
-        de = torch.nn.functional.pad(d, (0, 1))              # neuron N: the padding, always 0
-        M, L = self.idx.shape[1:]
-        of = _owners(M, L, d.device)
-        if self.idx.shape[0] == 1:   # one memory for all cues: cues last, so each index moves a whole row
-            flat = self.idx.flatten()
-            dt = de.T.contiguous()
-            u = dt.new_zeros(M, B).index_add_(0, of, dt.index_select(0, flat))             # (M, B) = X d
-            h = dt.new_zeros(N + 1, B).index_add_(0, flat, u.index_select(0, of)).T.contiguous()
-        else:   # each cue its own memory; the same order of additions as above
+        pad = torch.nn.functional.pad
+        de = pad(d, (0, 1)) if self.lists is None or self.z.shape[1] else None   # neuron N: the padding, always 0
+        if self.lists is not None:   # one memory for all cues, cues last: each bag sums whole rows, in order
+            cols, starts, owners, firsts = self.lists
+            u = torch.nn.functional.embedding_bag(cols, d.T.contiguous(), starts, mode="sum")    # (M, B) = X d
+            h = torch.nn.functional.embedding_bag(owners, u, firsts, mode="sum").T               # (B, N)
+            h = pad(h, (0, 1)) if self.z.shape[1] else h
+        else:   # each cue its own memory, the additions in the same order: pattern by pattern, then neuron by neuron
+            M, L = self.idx.shape[1:]
+            of = _owners(M, L, d.device)
             flat = self.idx.flatten(1)
             u = de.new_zeros(B, M).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, M) = X d
             h = torch.zeros_like(de).scatter_add_(1, flat, u.index_select(1, of))
@@ -329,9 +334,15 @@ class EpisodicMemory(nn.Module):
             # depression only takes episodes out) is predicted at its mean whatever J says, and its deviation
             # counts 0 for the others: its synapses are left out of the products
             x = x & ((total > 0) & (total < count))[:, None]
+        lists = None
+        if x.shape[0] == 1:
+            def bags(m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                size = m.sum(1)
+                return m.nonzero()[:, 1], size.cumsum(0) - size
+            lists = (*bags(x[0]), *bags(x[0].T))
         return _Net(active_neurons(x), total.float().expand(batch, -1).contiguous(),
                     count.float().expand(batch, 1).contiguous(),
-                    torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device))
+                    torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device), lists=lists)
 
     @torch.no_grad()
     def predict(self, state: torch.Tensor) -> torch.Tensor:
@@ -390,7 +401,7 @@ class EpisodicMemory(nn.Module):
         for r in range(K):
             if idx.numel() == 0:
                 break
-            sub = _Net(net.idx, total, n, z[:, :r]).take(idx).ready()
+            sub = net._replace(total=total, n=n, z=z[:, :r]).take(idx).ready()
             state, fixed = self._settle(cue[idx] if c.cue_power == 1 else drive[idx], sub)
             obj = state[:, list(c.cue_rows)].flatten(1).float()
             s = (cue[idx] * obj).sum(1) / obj.sum(1).clamp(min=1.0)
