@@ -129,21 +129,22 @@ class Recall(NamedTuple):
     any: torch.Tensor       # (B,) bool: at least one episode recalled
 
 
-def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float) -> torch.Tensor:
+def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float, finite: bool = False) -> torch.Tensor:
     """Per-row inhibition: (..., R, C) predicted activity -> bool state, the k_r largest of row r firing if above
-    threshold. Exact ties go to the lower neuron index, so the result never depends on the batch."""
+    threshold. Exact ties go to the lower neuron index, so the result never depends on the batch. finite=True: the
+    caller knows `a` holds no NaN (the check is skipped)."""
     fire = a > threshold
     k = row_k.expand(a.shape[:-1])
     # a row with at most k_r neurons above threshold fires them all; only the others need ranking (and a row with a
     # NaN, which the ranking puts first)
     crowded = fire.sum(-1) > k
-    if bool(torch.isnan(a).any()):
+    if not finite and bool(torch.isnan(a).any()):
         crowded |= torch.isnan(a).any(-1)
     if not bool(crowded.any()):
         return fire
     a, k = a[crowded], k[crowded][:, None]                  # (n, C), (n, 1)
     kmax = int(k.max())
-    if kmax > 3 or bool(torch.isnan(a).any()):   # a sort of each row (topk ranks NaN above everything)
+    if kmax > 3 or (not finite and bool(torch.isnan(a).any())):   # a sort (topk ranks NaN above everything)
         kth = a.topk(kmax, dim=-1).values.gather(-1, k - 1)
     else:   # the k-th largest (counted with ties) by stepping down the row's distinct values
         kth = a.amax(-1, keepdim=True)
@@ -188,23 +189,25 @@ class _Net(NamedTuple):
     p: torch.Tensor | None = None
     inv: torch.Tensor | None = None
     gain: torch.Tensor | None = None
+    q: torch.Tensor | None = None
     # one memory for all cues: its active neurons pattern by pattern and its patterns neuron by neuron, as the
     # indices and bag offsets of embedding_bag (cols, starts, owners, firsts)
     lists: tuple | None = None
 
     def take(self, i: torch.Tensor) -> "_Net":
         return _Net(self.idx if self.idx.shape[0] == 1 else self.idx[i],
-                    *(t if t is None else t[i] for t in self[1:7]), self.lists)
+                    *(t if t is None else t[i] for t in self[1:8]), self.lists)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
 
     def ready(self) -> "_Net":
-        """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0) and sigma / sigma."""
+        """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0), sigma / sigma and 1 - p."""
         p = self.mean()
-        sigma = (p * (1 - p)).sqrt()
+        q = 1 - p
+        sigma = (p * q).sqrt()
         inv = torch.where(sigma > 1e-6, 1.0 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
-        return self._replace(p=p, inv=inv, gain=sigma * inv)
+        return self._replace(p=p, inv=inv, gain=sigma * inv, q=q)
 
     def predict(self, d: torch.Tensor, zscore: bool = True) -> torch.Tensor:
         """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean, d~ = d / sigma, and
@@ -246,7 +249,7 @@ class _Net(NamedTuple):
             h.scatter_add_(1, flat, w.neg_().index_select(1, of))
         h = h[:, :N]
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
-        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p) * d)
+        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p if self.q is None else self.q) * d)
 
 
 class EpisodicMemory(nn.Module):
@@ -430,11 +433,14 @@ class EpisodicMemory(nn.Module):
             cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
         cue = cue.view(B, len(rows), C)
         s[:, rows] = cue
+        # a prediction is NaN only where sigma is (p outside [0, 1], after depressing a state that was no stored
+        # episode); otherwise k_winners need not look for NaN
+        finite = not c.zscore or not bool(torch.isnan(net.gain).any())
         for clamp, steps in ((True, c.cue_steps), (False, c.free_steps)):
             idx, sub, cur, q = torch.arange(B, device=cue.device), net, s, cue   # the cues still moving
             for _ in range(steps):
                 new = k_winners(sub.predict((cur - sub.p.view_as(cur)).flatten(1), c.zscore).view_as(cur),
-                                self.row_k, c.threshold).to(cur.dtype)
+                                self.row_k, c.threshold, finite).to(cur.dtype)
                 if clamp:
                     new[:, rows] = q
                 moving = (new != cur).flatten(1).any(1)
