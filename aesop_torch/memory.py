@@ -181,7 +181,7 @@ class _Net(NamedTuple):
     """The factorised network seen by a batch of cues: the stored patterns as the indices of their active neurons
     idx (1 or B, M, L) (shared or per cue, padded with N), and per cue the sum of the patterns still in play (B, N),
     their number (B, 1) and the depressed states' active neurons (B, r, L'). The per-cue constants of a settle (mean
-    p, 1 / sigma, sigma / sigma) are computed once by `ready` and carried along."""
+    p, 1 / sigma, sigma / sigma, 1 - p) are computed once by `ready` and carried along."""
     idx: torch.Tensor
     total: torch.Tensor
     n: torch.Tensor
