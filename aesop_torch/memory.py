@@ -30,12 +30,15 @@ The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not availab
   is not a fixed point, nothing is left, or `max_recalls` episodes were recalled. Results: strongest first.
 
 Nothing dense is stored: J is a sum of outer products, so J d = X^T (X d) - S (S . d) / n - diag(J) d is computed
-from the stored patterns X (B, max_episodes, 20, 50) bool, their sum S and count n. `weights(b)` and
-`mean_activity(b)` give the dense network of one agent for inspection and tests.
+from the stored patterns X (B, max_episodes, 20, 50) bool, their sum S and count n. X d and X^T (X d) are gathers and
+scatters over each pattern's active neurons (~40 of 1000; z-scored, only those that vary across the stored episodes),
+with the additions in one fixed order: a cue's recall does not depend on the batch it is computed in or on the
+thread count. `weights(b)` and `mean_activity(b)` give the dense network of one agent for inspection and tests.
 """
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
@@ -98,9 +101,9 @@ class MemoryConfig:
     # objects, so it never cuts a recall there (longer runs recall their 8 strongest).
     max_recalls: int = 8
     # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the
-    # (256, 1000) working tensors in cache, measured 1.5x faster than 4096 agents at once and 1.2x faster than
-    # 1,150 cues against one full memory at once (benches/memory_capacity.py); and a bound on the float copy of
-    # the agents' patterns (elements per chunk): 2^25 floats = 128 MB however many episodes they hold.
+    # (256, 1000) working tensors in cache; of 16 to 1024, 256 was fastest for 984 cues against 230 of the agent's
+    # episodes (1.14x 1024, 1.6x 32). And a bound on the agents' patterns handled at once (elements per chunk):
+    # 2^25 however many episodes they hold.
     chunk_agents: int = 256
     chunk_elements: int = 1 << 25
 
@@ -126,54 +129,127 @@ class Recall(NamedTuple):
     any: torch.Tensor       # (B,) bool: at least one episode recalled
 
 
-def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float) -> torch.Tensor:
+def k_winners(a: torch.Tensor, row_k: torch.Tensor, threshold: float, finite: bool = False) -> torch.Tensor:
     """Per-row inhibition: (..., R, C) predicted activity -> bool state, the k_r largest of row r firing if above
-    threshold. Exact ties go to the lower neuron index, so the result never depends on the batch."""
-    kth = a.topk(int(row_k.max()), dim=-1).values.gather(-1, (row_k - 1).expand(*a.shape[:-2], -1)[..., None])
+    threshold. Exact ties go to the lower neuron index, so the result never depends on the batch. finite=True: the
+    caller knows `a` holds no NaN (the check is skipped)."""
+    fire = a > threshold
+    k = row_k.expand(a.shape[:-1])
+    # a row with at most k_r neurons above threshold fires them all; only the others need ranking (and a row with a
+    # NaN, which the ranking puts first)
+    crowded = fire.sum(-1) > k
+    if not finite and bool(torch.isnan(a).any()):
+        crowded |= torch.isnan(a).any(-1)
+    if not bool(crowded.any()):
+        return fire
+    a, k = a[crowded], k[crowded][:, None]                  # (n, C), (n, 1)
+    kmax = int(k.max())
+    if kmax > 3 or (not finite and bool(torch.isnan(a).any())):   # a sort (topk ranks NaN above everything)
+        kth = a.topk(kmax, dim=-1).values.gather(-1, k - 1)
+    else:   # the k-th largest (counted with ties) by stepping down the row's distinct values
+        kth = a.amax(-1, keepdim=True)
+        for _ in range(kmax - 1):
+            short = (a >= kth).sum(-1, keepdim=True) < k
+            if not bool(short.any()):
+                break
+            below = torch.where(a < kth, a, torch.full_like(a, -torch.inf)).amax(-1, keepdim=True)
+            kth = torch.where(short, below, kth)
     above, tied = a > kth, a == kth
-    room = row_k[:, None] - above.sum(-1, keepdim=True)    # places left for neurons tied with the k-th
-    return (above | (tied & (tied.cumsum(-1) <= room))) & (a > threshold)
+    room = k - above.sum(-1, keepdim=True)    # places left for neurons tied with the k-th
+    fire[crowded] = (above | (tied & (tied.cumsum(-1) <= room))) & (a > threshold)
+    return fire
+
+
+def active_neurons(x: torch.Tensor, width: int | None = None) -> torch.Tensor:
+    """(..., N) bool -> (..., width) long: the indices of the active neurons in increasing order, padded with N (a
+    neuron that is always silent). width defaults to the most active neurons of any pattern."""
+    N = x.shape[-1]
+    width = int(x.sum(-1).max()) if width is None and x.numel() else width or 0
+    out = torch.full((*x.shape[:-1], width + 1), N, dtype=torch.long, device=x.device)
+    slot = torch.where(x, x.cumsum(-1) - 1, width)      # inactive neurons all land in the spare slot `width`
+    out.scatter_(-1, slot, torch.arange(N, device=x.device).expand(x.shape))
+    return out[..., :width]
+
+
+@functools.lru_cache(maxsize=64)
+def _owners(M: int, L: int, device) -> torch.Tensor:
+    """(M * L,) the pattern each entry of the flattened (M, L) index lists belongs to: 0, 0, ..., 1, 1, ..."""
+    return torch.arange(M, device=device).repeat_interleave(L)
 
 
 class _Net(NamedTuple):
-    """The factorised network seen by a batch of cues: patterns x (1 or B, M, N) float 0/1 (shared or per cue),
-    and per cue the sum of the patterns still in play (B, N), their number (B, 1) and the depressed states (B, r, N)."""
-    x: torch.Tensor
+    """The factorised network seen by a batch of cues: the stored patterns as the indices of their active neurons
+    idx (1 or B, M, L) (shared or per cue, padded with N), and per cue the sum of the patterns still in play (B, N),
+    their number (B, 1) and the depressed states' active neurons (B, r, L'). The per-cue constants of a settle (mean
+    p, 1 / sigma, sigma / sigma, 1 - p) are computed once by `ready` and carried along."""
+    idx: torch.Tensor
     total: torch.Tensor
     n: torch.Tensor
     z: torch.Tensor
+    p: torch.Tensor | None = None
+    inv: torch.Tensor | None = None
+    gain: torch.Tensor | None = None
+    q: torch.Tensor | None = None
+    # one memory for all cues: its active neurons pattern by pattern and its patterns neuron by neuron, as the
+    # indices and bag offsets of embedding_bag (cols, starts, owners, firsts)
+    lists: tuple | None = None
 
     def take(self, i: torch.Tensor) -> "_Net":
-        return _Net(self.x if self.x.shape[0] == 1 else self.x[i], self.total[i], self.n[i], self.z[i])
+        return _Net(self.idx if self.idx.shape[0] == 1 else self.idx[i],
+                    *(t if t is None else t[i] for t in self[1:8]), self.lists)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
+
+    def ready(self) -> "_Net":
+        """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0), sigma / sigma and 1 - p."""
+        p = self.mean()
+        q = 1 - p
+        sigma = (p * q).sqrt()
+        inv = torch.where(sigma > 1e-6, 1.0 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
+        return self._replace(p=p, inv=inv, gain=sigma * inv, q=q)
 
     def predict(self, d: torch.Tensor, zscore: bool = True) -> torch.Tensor:
         """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean, d~ = d / sigma, and
         J~ = D^-1 J D^-1 (D = diag(sigma)) of the patterns in play; zscore=False: sigma = 1, the plain covariance
         rule. A neuron that never varies (sigma = 0) is predicted at its mean and is no evidence for the others."""
-        p = self.mean()
+        net = self if self.p is not None else self.ready()
         if not zscore:
-            return p + self.covariance_product(d) / ((d * d).sum(1, keepdim=True) - d * d).clamp(min=_EPS)
-        sigma = (p * (1 - p)).sqrt()
-        inv = torch.where(sigma > 1e-6, 1.0 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
-        dz = d * inv
-        h = self.covariance_product(dz * inv)                    # J (D^-1 d~); times D^-1 and sigma below: 1
-        return p + h * (sigma * inv) / ((dz * dz).sum(1, keepdim=True) - dz * dz).clamp(min=_EPS)
+            return net.p + net.covariance_product(d) / ((d * d).sum(1, keepdim=True) - d * d).clamp(min=_EPS)
+        dz = d * net.inv
+        h = net.covariance_product(dz * net.inv)                 # J (D^-1 d~); times D^-1 and sigma below: 1
+        sq = dz * dz
+        return net.p + h * net.gain / (sq.sum(1, keepdim=True) - sq).clamp(min=_EPS)
 
     def covariance_product(self, d: torch.Tensor) -> torch.Tensor:
-        """J d for d (B, N), J = sum_mu (x_mu - p)(x_mu - p)^T with a zero diagonal, over the patterns in play."""
-        x, S, n, z = self
-        p = S / n.clamp(min=1)
-        if x.shape[0] == 1 and d.shape[0] != 1:   # many cues against one memory: two plain matrix products
-            h = (d @ x[0].T) @ x[0]
-        else:
-            h = torch.bmm(torch.bmm(x, d[:, :, None]).transpose(1, 2), x)[:, 0]
-        if z.shape[1]:   # a few depressed states per cue: elementwise beats tiny batched products
-            h = h - ((z * d[:, None]).sum(-1, keepdim=True) * z).sum(1)
+        """J d for d (B, N), J = sum_mu (x_mu - p)(x_mu - p)^T with a zero diagonal, over the patterns in play.
+
+        X^T (X d) and the depressed states' Z^T (Z d) are gathers and scatters over the active neurons (~40 of
+        1000 in a pattern) rather than dense products; each output a sum from 0 in increasing index order."""
+        S, n = self.total, self.n
+        p = self.p if self.p is not None else S / n.clamp(min=1)
+        B, N = d.shape
+        pad = torch.nn.functional.pad
+        de = pad(d, (0, 1)) if self.lists is None or self.z.shape[1] else None   # neuron N: the padding, always 0
+        if self.lists is not None:   # one memory for all cues, cues last: each bag sums whole rows, in order
+            cols, starts, owners, firsts = self.lists
+            u = torch.nn.functional.embedding_bag(cols, d.T.contiguous(), starts, mode="sum")    # (M, B) = X d
+            h = torch.nn.functional.embedding_bag(owners, u, firsts, mode="sum").T               # (B, N)
+            h = pad(h, (0, 1)) if self.z.shape[1] else h
+        else:   # each cue its own memory, the additions in the same order: pattern by pattern, then neuron by neuron
+            M, L = self.idx.shape[1:]
+            of = _owners(M, L, d.device)
+            flat = self.idx.flatten(1)
+            u = de.new_zeros(B, M).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, M) = X d
+            h = torch.zeros_like(de).scatter_add_(1, flat, u.index_select(1, of))
+        if self.z.shape[1]:
+            r, L = self.z.shape[1:]
+            flat, of = self.z.flatten(1), _owners(r, L, d.device)
+            w = de.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, r) = Z d
+            h.scatter_add_(1, flat, w.neg_().index_select(1, of))
+        h = h[:, :N]
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
-        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p) * d)
+        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p if self.q is None else self.q) * d)
 
 
 class EpisodicMemory(nn.Module):
@@ -254,16 +330,28 @@ class EpisodicMemory(nn.Module):
         return J
 
     def _net(self, mem: slice, batch: int) -> _Net:
-        x = self.patterns[mem, :int(self.count[mem].max())].flatten(2).float()
-        total = x.sum(1).expand(batch, -1).contiguous()
-        n = self.count[mem].to(x.dtype)[:, None].expand(batch, 1).contiguous()
-        return _Net(x, total, n, x.new_zeros(batch, 0, x.shape[2]))
+        x = self.patterns[mem, :int(self.count[mem].max())].flatten(2)
+        total, count = x.sum(1), self.count[mem][:, None]
+        if self.config.zscore:
+            # a neuron every stored episode uses or none does (p = 0 or 1, sigma = 0; and so for the rest of a recall,
+            # depression only takes episodes out) is predicted at its mean whatever J says, and its deviation
+            # counts 0 for the others: its synapses are left out of the products
+            x = x & ((total > 0) & (total < count))[:, None]
+        lists = None
+        if x.shape[0] == 1:
+            def bags(m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+                size = m.sum(1)
+                return m.nonzero()[:, 1], size.cumsum(0) - size
+            lists = (*bags(x[0]), *bags(x[0].T))
+        return _Net(active_neurons(x), total.float().expand(batch, -1).contiguous(),
+                    count.float().expand(batch, 1).contiguous(),
+                    torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device), lists=lists)
 
     @torch.no_grad()
     def predict(self, state: torch.Tensor) -> torch.Tensor:
         """What the network predicts for every neuron given the others, for states (B, rows, cols) in [0, 1]."""
         net = self._net(slice(None), self.batch)
-        s = state.flatten(1).to(net.x)
+        s = state.flatten(1).to(net.total)
         return net.predict(s - net.mean(), self.config.zscore).view(state.shape)
 
     # -- recall -----------------------------------------------------------------------------------------------
@@ -309,14 +397,14 @@ class EpisodicMemory(nn.Module):
         """Retrieve, depress, retrieve again; writes into the (B, K, ...) outputs."""
         c = self.config
         B, K = cue.shape[0], episodes.shape[1]
-        z = net.x.new_zeros(B, K, net.x.shape[2])
+        z = torch.full((B, K, sum(c.row_k)), net.total.shape[1], dtype=torch.long, device=cue.device)
         total, n = net.total.clone(), net.n.clone()
         idx = torch.arange(B, device=cue.device)[n[:, 0] > 0]
         drive = cue.clone()               # the cue less the objects already retrieved (with cue_power != 1)
         for r in range(K):
             if idx.numel() == 0:
                 break
-            sub = _Net(net.x, total, n, z[:, :r]).take(idx)
+            sub = net._replace(total=total, n=n, z=z[:, :r]).take(idx).ready()
             state, fixed = self._settle(cue[idx] if c.cue_power == 1 else drive[idx], sub)
             obj = state[:, list(c.cue_rows)].flatten(1).float()
             s = (cue[idx] * obj).sum(1) / obj.sum(1).clamp(min=1.0)
@@ -324,8 +412,9 @@ class EpisodicMemory(nn.Module):
             good = idx[ok]
             episodes[good, r], strength[good, r], valid[good, r] = state[ok], s[ok], True
             # depression: the retrieved state leaves the weights and the mean for the rest of this recall
-            z[good, r] = state[ok].flatten(1).float()
-            total[good] -= z[good, r]
+            kept = state[ok].flatten(1)
+            z[good, r] = active_neurons(kept, z.shape[2])   # a state of the k-WTA has at most sum(row_k) active
+            total[good] -= kept.float()
             n[good] -= 1
             drive[good] *= 1 - obj[ok]
             idx = good[n[good, 0] > 0]
@@ -333,29 +422,37 @@ class EpisodicMemory(nn.Module):
     def _settle(self, cue: torch.Tensor, net: _Net) -> tuple[torch.Tensor, torch.Tensor]:
         """Clamped pattern completion, then free running; returns (state (B, rows, cols) bool, fixed point (B,)).
 
-        Each cue stops iterating at its own fixed point (the dynamics are deterministic, so it would stay there)."""
+        Each cue stops iterating at its own fixed point (the dynamics are deterministic, so it would stay there):
+        only the cues still moving are carried on."""
         c = self.config
         B, R, C = cue.shape[0], c.rows, c.cols
-        p = net.mean().view(B, R, C)
-        s = p.clone()                      # unknown rows sit at the mean: no evidence either way
+        s = net.p.view(B, R, C).clone()    # unknown rows sit at the mean: no evidence either way
         rows = list(c.cue_rows)
         if c.cue_power != 1:              # relative to the strongest neuron, then the power
             peak = cue.amax(1, keepdim=True)
             cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
-        s[:, rows] = cue.view(B, len(rows), C)
+        cue = cue.view(B, len(rows), C)
+        s[:, rows] = cue
+        # a prediction is NaN only where sigma is (p outside [0, 1], after depressing a state that was no stored
+        # episode); otherwise k_winners need not look for NaN
+        finite = not c.zscore or not bool(torch.isnan(net.gain).any())
         for clamp, steps in ((True, c.cue_steps), (False, c.free_steps)):
-            idx, sub = torch.arange(B, device=cue.device), net   # the cues still moving
+            idx, sub, cur, q = torch.arange(B, device=cue.device), net, s, cue   # the cues still moving
             for _ in range(steps):
-                cur = s[idx]
-                new = k_winners(sub.predict((cur - p[idx]).flatten(1), c.zscore).view_as(cur), self.row_k,
-                                c.threshold).to(cur.dtype)
+                new = k_winners(sub.predict((cur - sub.p.view_as(cur)).flatten(1), c.zscore).view_as(cur),
+                                self.row_k, c.threshold, finite).to(cur.dtype)
                 if clamp:
-                    new[:, rows] = cue[idx].view(-1, len(rows), C)
+                    new[:, rows] = q
                 moving = (new != cur).flatten(1).any(1)
+                if moving.all():
+                    cur = new
+                    continue
                 s[idx] = new
-                idx, sub = idx[moving], sub.take(moving) if not moving.all() else sub
+                idx, sub, cur, q = idx[moving], sub.take(moving), new[moving], q[moving]
                 if idx.numel() == 0:
                     break
+            else:
+                s[idx] = cur
         fixed = torch.ones(B, dtype=torch.bool, device=cue.device)
         fixed[idx] = False                  # still moving when the free phase ran out of steps
         return s.bool(), fixed

@@ -7,8 +7,10 @@ diagonal, sign dynamics (asynchronous, in random blocks of 50 neurons), exact = 
 (a) the same 50 object-row neurons right and the other 950 zero (unknown), (b) those 50 right and the other 950
 random, (c) the textbook setting: the whole pattern with 10 % of the bits flipped.
 Then correlated, agent-like episodes (the same reach/grasp/drop rows every time): ours against the covariance rule
-with the nominal sparsity offset a_r = k_r / 50, which these episodes defeat. Then recall throughput: many cues
-against one full memory, many agents each with its own small memory, and the classical peer.
+with the nominal sparsity offset a_r = k_r / 50, which these episodes defeat. Then recall throughput, beside the
+recall before it was made fast (benches/memory_reference.py, run alternately in the same process): many cues against
+one full memory of random or of the agent's episodes, many agents each with its own small memory; and the classical
+peer.
 
 Then the agent's own episodes: distinct generated objects (`sim.make_objects`, seeds 0-9, measured and
 outcomes with the simulated robot's noise), each stored as the agent stores it (`Agent.remember`: its object-hub
@@ -22,7 +24,7 @@ worst and median. Then the graded recall a prediction needs: for novel objects (
 recalled episode the stored object nearest to it (the highest hub match)? (The agent's sheet layout and the cue's
 power were chosen on sets of seeds 1000 and up; seeds 0-9 were not looked at while choosing them.)
 
-Run: .venv/bin/python benches/memory_capacity.py
+Run: .venv/bin/python benches/memory_capacity.py [--throughput]   (--throughput: that section alone, not recorded)
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig  # noqa: E402
 from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners  # noqa: E402
+from memory_reference import DenseEpisodicMemory  # noqa: E402   # the recall of commit 59ec298, a peer
 from record import recorded   # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 R, C, OBJ, N = 20, 50, 1, 1000
@@ -216,6 +219,69 @@ def agent_section(seeds=range(10), counts=tuple(range(10, 231, 10))) -> int:
     return min(caps["ours"])
 
 
+def side_by_side(ours_fn, ref_fn, repeats: int = 3) -> tuple[float, float]:
+    """Median seconds of ours and of the reference, run alternately (the machine is shared: both see its load)."""
+    t_ours, t_ref = [], []
+    for _ in range(repeats):
+        for fn, ts in ((ours_fn, t_ours), (ref_fn, t_ref)):
+            t = time.perf_counter()
+            fn()
+            ts.append(time.perf_counter() - t)
+    return statistics.median(t_ours), statistics.median(t_ref)
+
+
+def throughput_line(label: str, mem: EpisodicMemory, ref: DenseEpisodicMemory, cues: torch.Tensor, k=None):
+    a, b = mem.recall(cues, max_recalls=k), ref.recall(cues, max_recalls=k)
+    same = sum(all(torch.equal(x[i], y[i]) for x, y in zip(a, b)) for i in range(len(cues)))
+    t_ours, t_ref = side_by_side(lambda: mem.recall(cues, max_recalls=k), lambda: ref.recall(cues, max_recalls=k))
+    print(f"{label}: {len(cues) / t_ours:8.0f} cues/s, reference {len(cues) / t_ref:6.0f} cues/s, "
+          f"{t_ref / t_ours:5.2f}x ({a.valid.sum(1).float().mean().item():.1f} episodes per cue; "
+          f"{same} of {len(cues)} recalls identical to the reference's)", flush=True)
+
+
+def copy_into(cls, mem: EpisodicMemory):
+    out = cls(mem.config, batch=mem.batch)
+    out.load_state_dict(mem.state_dict())
+    return out
+
+
+def throughput_section():
+    """Recall throughput against the recall before it was made fast (benches/memory_reference.py, commit 59ec298):
+    the same memories and cues, alternated, medians of 3, one torch thread."""
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    try:
+        print("\nrecall throughput, 1 thread, ours against the reference (the recall of commit 59ec298, dense "
+              "products: benches/memory_reference.py), alternated, medians of 3")
+        x = random_episodes(230, torch.Generator().manual_seed(SEED))
+        mem, _ = ours(x)
+        cues = x[:, OBJ].float().repeat(5, 1)
+        for k in (1, MemoryConfig().max_recalls):
+            throughput_line(f"230 random episodes, 1150 cues, max_recalls={k}", mem,
+                            copy_into(DenseEpisodicMemory, mem), cues, k)
+        agent, _, life_cues, _, probe_cues = agent_life(SEED, 230)
+        mask = agent._episode_neurons().to(life_cues.dtype)   # as Agent.anticipate_acts cues its memory
+        cues = torch.cat([life_cues, probe_cues]) * mask
+        for k in (1, MemoryConfig().max_recalls):
+            throughput_line(f"230 of the agent's episodes (set {SEED}), its 230 objects and 16 probes as cues, "
+                            f"max_recalls={k}", agent.memory, copy_into(DenseEpisodicMemory, agent.memory), cues, k)
+        agents = 4096
+        x = torch.stack([agent_episodes(8, torch.Generator().manual_seed(b)) for b in range(64)]).repeat(64, 1, 1, 1)
+        mem = EpisodicMemory(MemoryConfig(max_episodes=8), batch=agents)
+        for m in range(8):
+            mem.store(x[:, m])
+        q = 0.75 * x[:, 3, OBJ].float()  # an object differing in one property of four from a stored one
+        throughput_line(f"{agents} agents, each its own memory of 8 agent-like episodes", mem,
+                        copy_into(DenseEpisodicMemory, mem), q)
+        g = torch.Generator().manual_seed(SEED)
+        xi = torch.randint(0, 2, (230, N), generator=g).float() * 2 - 1
+        noisy = torch.where(torch.rand(1150, N, generator=g) < 0.1, -1.0, 1.0) * xi.repeat(5, 1)
+        rate = best_rate(lambda: hopfield(xi, noisy, g), len(noisy))
+        print(f"classical hopfield (10% flipped cues, 230 patterns): {rate:8.0f} recalls/s")
+    finally:
+        torch.set_num_threads(threads)
+
+
 def hopfield(xi: torch.Tensor, cues: torch.Tensor, g: torch.Generator, sweeps: int = 30) -> torch.Tensor:
     """Classical recall: block-asynchronous s_i <- sign(sum_j J_ij s_j) (sign 0 keeps s_i) to a fixed point."""
     J = xi.T @ xi / N
@@ -284,32 +350,16 @@ def main():
         x = agent_episodes(n, torch.Generator().manual_seed(SEED))
         print(f"{n:>6} {ours_exact(x):>6.3f} {nominal_exact(x):>15.3f}")
 
-    print("\nrecall throughput, full memory of 230 random episodes, 1150 cues batched (best of 3)")
-    x = random_episodes(230, torch.Generator().manual_seed(SEED))
-    mem, _ = ours(x)
-    cues = x[:, OBJ].float().repeat(5, 1)
-    for k in (1, MemoryConfig().max_recalls):
-        rate = best_rate(lambda: mem.recall(cues, max_recalls=k), len(cues))
-        n_rec = mem.recall(cues, max_recalls=k).valid.sum(1).float().mean().item()
-        print(f"ours, max_recalls={k}: {rate:8.0f} recalls/s ({n_rec:.1f} episodes recalled per cue)")
-    agents = 4096
-    x = torch.stack([agent_episodes(8, torch.Generator().manual_seed(b)) for b in range(64)]).repeat(64, 1, 1, 1)
-    mem = EpisodicMemory(MemoryConfig(max_episodes=8), batch=agents)
-    for m in range(8):
-        mem.store(x[:, m])
-    q = 0.75 * x[:, 3, OBJ].float()  # an object differing in one property of four from a stored one
-    rate = best_rate(lambda: mem.recall(q), agents)
-    print(f"ours, {agents} agents, each its own memory of 8 agent-like episodes: {rate:8.0f} recalls/s")
-    g = torch.Generator().manual_seed(SEED)
-    xi = torch.randint(0, 2, (230, N), generator=g).float() * 2 - 1
-    noisy = torch.where(torch.rand(len(cues), N, generator=g) < 0.1, -1.0, 1.0) * xi.repeat(5, 1)
-    rate = best_rate(lambda: hopfield(xi, noisy, g), len(cues))
-    print(f"classical hopfield (10% flipped cues): {rate:8.0f} recalls/s")
+    throughput_section()
     agent_capacity = agent_section()
     print(f"\nbench time {time.perf_counter() - t0:.0f} s")
     print(f"capacity_episodes={capacity} agent_capacity_episodes={agent_capacity}")
 
 
 if __name__ == "__main__":
-    with recorded("memory_capacity"):
-        main()
+    if "--throughput" in sys.argv[1:]:
+        with recorded("memory_capacity", enabled=False), torch.no_grad():
+            throughput_section()
+    else:
+        with recorded("memory_capacity"):
+            main()

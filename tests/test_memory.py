@@ -281,3 +281,32 @@ def test_capacity_of_a_small_sheet_by_hand():
     out = mem.recall(cues[:1])
     got = {int(e[1].nonzero()) for e, v in zip(out.episodes[0], out.valid[0]) if v}
     assert got == {pi[0], 3} and out.strength[0, :2].tolist() == pytest.approx([1.0, 1.0])
+
+
+def test_a_recall_does_not_depend_on_the_batch_it_is_in():
+    # graded cues against 150 random episodes, several recalls each: near ties that float rounding could settle
+    # either way, so the sums must run in the same order for a cue alone as among others
+    g = torch.Generator().manual_seed(7)
+    x = random_episodes(150, g)
+    mem = memory(*x[:, None])
+    cues = (0.8 * x[:40, OBJ].float() + 0.3 * torch.rand(40, C, generator=g)).clamp(max=1.0)
+    states = torch.rand(40, R, C, generator=g)
+    states[:20] = (states[:20] < 0.05).float()
+    together = mem.predict(states)                      # what the network predicts, bit for bit
+    for i in range(0, 40, 3):
+        assert torch.equal(mem.predict(states[i:i + 1])[0], together[i])
+    together = mem.recall(cues, max_recalls=4)
+    assert together.valid.sum() > 40                     # more than one episode per cue on average
+    for i in range(0, 40, 3):
+        alone = mem.recall(cues[i:i + 1], max_recalls=4)
+        assert all(torch.equal(a[0], t[i]) for a, t in zip(alone, together))
+    # agents each with their own memory: in one batch, or each alone
+    agents = EpisodicMemory(MemoryConfig(max_episodes=30), batch=4)
+    for m in range(30):
+        agents.store(x[m::30][:4], mask=torch.tensor([True, m < 20, m < 10, True]))
+    q = cues[:4]
+    together = agents.recall(q, max_recalls=4)
+    for b in range(4):
+        alone = EpisodicMemory(MemoryConfig(max_episodes=30))
+        alone.patterns[0], alone.count[0] = agents.patterns[b], agents.count[b]
+        assert all(torch.equal(a[0], t[b]) for a, t in zip(alone.recall(q[b:b + 1], max_recalls=4), together))

@@ -31,7 +31,6 @@ import torch
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, Recall
 from train.experiment import stack_measurements
-from train.physics import cores
 from train.summary import KNOWLEDGE_LETTERS
 
 # Sibling trie nodes stepped together. All 40,320 orders of the default set, 2 threads, shared recall cache:
@@ -39,6 +38,10 @@ from train.summary import KNOWLEDGE_LETTERS
 # level of the depth-first walk holds one piece alive, ~110 kB per agent, mostly the hub's W): 1024 is as fast as
 # any and lean.
 DEFAULT_CHUNK = 1024
+# torch threads of a population run. 2,000 orders of the default set (closed-form outcomes, as benches/population.py)
+# on the shared 2-core machine while other jobs ran: 19.7 s on 1 thread, 79.0 s on 2. Threads that wait for each
+# other on a busy machine lose more than they win on the population's small steps (so does the runner: 1 thread).
+DEFAULT_THREADS = 1
 
 
 def knowledge_keys(state: torch.Tensor) -> list[str]:
@@ -187,7 +190,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
-    every core: the batches are large), restored afterwards.
+    DEFAULT_THREADS), restored afterwards.
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
@@ -210,7 +213,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 
     t0 = time.perf_counter()
     old_threads = torch.get_num_threads()
-    torch.set_num_threads(threads or cores())
+    torch.set_num_threads(threads or DEFAULT_THREADS)
     try:
         config = copy.deepcopy(config)
         # as Experiment: an agent encodes at most one episode and one object per episode
