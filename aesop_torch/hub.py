@@ -272,14 +272,18 @@ class ObjectHub(nn.Module):
         overlap = stored.new_zeros(stored.shape[:2])                     # (B, A) chosen neurons in each
         chosen = torch.zeros(B, N, dtype=torch.bool, device=dev)
         usage = self.usage.to(torch.float64)
+        jitter = jitter.to(torch.float64)
+        big = float(stored.shape[1] + 1)
         for i in range(self.assembly_neurons):
-            row = torch.arange(N, device=dev) // per_row == i // self.config.assembly_size   # rows fill in turn
-            worst = (overlap[:, :, None] + stored).amax(1)                 # (B, N)
-            shared = torch.einsum("ba,ban->bn", overlap, stored)
+            # rows fill in turn: only the neurons of this one are candidates (scored alone, 1/rows of the work)
+            first = i // self.config.assembly_size * per_row
+            cols = slice(first, first + per_row)
+            row_stored = stored[:, :, cols]                                # (B, A, per_row)
+            worst = (overlap[:, :, None] + row_stored).amax(1)             # (B, per_row)
+            shared = torch.einsum("ba,ban->bn", overlap, row_stored)
             # lexicographic: worst overlap (<= S, the assembly's size), shared (< S * A), usage (<= A), jitter (< 0.5)
-            big = float(stored.shape[1] + 1)
-            score = (worst * self.assembly_neurons * big + shared) * big + usage + jitter.to(torch.float64)
-            k = torch.where(chosen | ~row, torch.full_like(score, float("inf")), score).argmin(-1)
+            score = (worst * self.assembly_neurons * big + shared) * big + usage[:, cols] + jitter[:, cols]
+            k = first + torch.where(chosen[:, cols], torch.full_like(score, float("inf")), score).argmin(-1)
             chosen[torch.arange(B, device=dev), k] = True
             overlap += stored[torch.arange(B, device=dev), :, k]
         return chosen
