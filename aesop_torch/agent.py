@@ -426,6 +426,17 @@ class Agent(nn.Module):
         return torch.einsum("bu,bau->ba", word, stored) / (word.norm(dim=-1, keepdim=True) *
                                                            stored.norm(dim=-1)).clamp_min(1e-12)
 
+    def _phrases(self, words) -> list[str]:
+        """A phrase, or one per agent -> B phrases; ValueError (one line) for another count or a word the agent
+        does not know."""
+        B = self.batch
+        phrases = [words] * B if isinstance(words, str) else list(words)
+        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
+            raise ValueError(f"words must be a phrase or {B} phrases")
+        for phrase in phrases:
+            _check_words(phrase)
+        return phrases
+
     @torch.no_grad()
     def imagine(self, words) -> Imagination:
         """Words, no object in view: the word map's activity drives the hub (bottom-up, the word pathway alone), the
@@ -435,11 +446,7 @@ class Agent(nn.Module):
         words: a phrase, or B phrases. ValueError (one line) for a word outside the vocabulary or no word at all:
         an unknown word is not guessed at. Words that name no stored object come back with known False."""
         B = self.batch
-        phrases = [words] * B if isinstance(words, str) else list(words)
-        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
-            raise ValueError(f"words must be a phrase or {B} phrases")
-        for phrase in phrases:
-            _check_words(phrase)
+        phrases = self._phrases(words)
         w = list(self.maps).index(WORD_MAP)
         score = self.name_match(word_activity(self.maps[WORD_MAP], encode_words(phrases)))   # (B, max_assemblies)
         top = score.topk(min(2, score.shape[1]), dim=-1)
@@ -463,11 +470,7 @@ class Agent(nn.Module):
         unit length, so d is the fraction of the goal's words heard ("reach the green ball": 1, "reach": 1/2).
         ValueError (one line) for a word outside the vocabulary: an unknown word is not guessed at."""
         B = self.batch
-        phrases = [words] * B if isinstance(words, str) else list(words)
-        if len(phrases) != B or not all(isinstance(p, str) for p in phrases):
-            raise ValueError(f"words must be a phrase or {B} phrases")
-        for phrase in phrases:
-            _check_words(phrase)
+        phrases = self._phrases(words)
         som = self.maps[WORD_MAP]
         heard = word_activity(som, encode_words(phrases))                                 # (B, U_word)
         bound = word_activity(som, encode_words([" ".join(GOAL_WORDS)]))[0]               # (U_word,)
