@@ -12,8 +12,8 @@ so the runner writes its first checkpoint and opens its logs while they import t
 simulate. `call` runs any other function there (the runner draws its figure on a worker while the trials play).
 
 On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
-pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has torch
-already. It is safe here: the runner holds no pybullet client (a GUI simulates in-process), and a worker's torch runs
+pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them
+already (`start` imports the simulator just before it forks: once, not once per worker). It is safe here: the runner holds no pybullet client (a GUI simulates in-process), and a worker's torch runs
 on one thread (`_init`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy
 on two threads and a tensorboard writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
@@ -85,6 +85,8 @@ class Physics:
         """Fork the workers now (each imports the simulator and builds its world while the caller goes on)."""
         if self.workers == 1 or self._pool is not None:
             return
+        if START_METHOD == "fork":
+            import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.8 s each)
         ctx = mp.get_context(START_METHOD)
         main = threading.current_thread() is threading.main_thread()   # only it may set handlers
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
