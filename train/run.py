@@ -360,10 +360,16 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
     physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)
     specs = {o.name: o for o in objects.train + objects.probe}
-    # probes are inspected once; with cached physics every distinct train object is dropped once, all up front
+    # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
+    # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
+    # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
+    # agent learns nothing from it here)
     todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
     probes = [n for n in exp.probe_names if n not in exp.probes]
-    jobs = [("drop", n, args.frames) for n in todo] + [("inspect", n, None) for n in probes]
+    on_stands = {n for stand in objects.trials for n in stand}
+    jobs = [("drop", n, args.frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
+                                                        for n in probes]
+    probe_drops = {}
     submitted = physics.submit(jobs)   # the workers start on them while the logs open
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
                             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
@@ -385,12 +391,14 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         return outcome_record(outcome)
 
     if jobs:
-        with Step(f"simulating {len(todo)} drop(s) and {len(probes)} probe inspection(s) on {physics.workers} "
+        with Step(f"simulating {len(todo)} drop(s) and {len(probes)} probe measurement(s) on {physics.workers} "
                   f"process(es)", len(jobs), "simulation") as bar:
             results = physics.run(jobs, progress=lambda job: bar.update(1, job[1]), submitted=submitted)
         for name, outcome in zip(todo, results):
             exp.outcomes[name] = keep(outcome, name)
         for name, m in zip(probes, results[len(todo):]):
+            if name in on_stands:
+                probe_drops[name], m = outcome_record(m), m.measurement
             exp.probes[name] = {"measurement": plain_measurement(m),
                                 "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
         checkpoint()
@@ -437,8 +445,8 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
               "not reset between the drops of a trial (each new sequence of drops simulated from a fresh jar)",
               flush=True)
         with Step("goal trials", None, "drop", announce=False) as bar:
-            # with cached physics an object's exploration drop is also a trial's first drop of it (a fresh jar)
-            exp.trials = play_trials(exp, objects, physics, first_drops=exp.outcomes,
+            # a trial's first drop of an object is the drop that measured it here (a fresh jar, the same noise seed)
+            exp.trials = play_trials(exp, objects, physics, first_drops={**exp.outcomes, **probe_drops},
                                      progress=lambda seq: bar.update(1, " > ".join(seq)))
         for i, r in enumerate(exp.trials[0]):
             print(trial_line(i, r), flush=True)

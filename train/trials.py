@@ -223,16 +223,16 @@ def outcome_dict(outcome) -> dict:
 def play_trials(exp, objects, physics=None, first_drops: dict | None = None, progress=None) -> list[list[dict]]:
     """The runner's goal trials: every trial of the objects file with every order's agent, in the simulated world
     (each drop into the jar as earlier drops of the trial left it, the IK reach test after each). A candidate is
-    lifted and weighed as in the exploration (its measurement from there, or inspected here for an object only
+    lifted and weighed as in the exploration (its measurement from there, or from a drop here for an object only
     trials use).
 
     Drops are cached by the sequence dropped so far in the trial (agents that chose alike share them); each round's
     new sequences are simulated together on `physics` (train.physics.Physics: the runner's worker pool; default one
     in this process, closed after), each from a fresh jar. first_drops: name -> outcome record of that object dropped
-    into a fresh jar of this world with this seed (the runner's cached exploration outcomes): a trial's first drop
-    of it is that same drop, bit for bit (tests/test_trials.py), so it is not simulated again."""
+    into a fresh jar of this world with this seed (the runner's cached exploration drops, and the drops that measured
+    its probes that wait on a stand): a trial's first drop of it is that same drop, bit for bit
+    (tests/test_trials.py), so it is not simulated again."""
     from sim.objects import archimedes_cm3
-    from train.experiment import plain_measurement
     from train.physics import Physics
 
     own = physics is None
@@ -240,12 +240,16 @@ def play_trials(exp, objects, physics=None, first_drops: dict | None = None, pro
     try:
         measurements = {n: o["measurement"] for n, o in exp.outcomes.items()}
         measurements.update({n: p["measurement"] for n, p in exp.probes.items()})
-        unseen = [n for n in dict.fromkeys(n for stand in objects.trials for n in stand) if n not in measurements]
-        for n, m in zip(unseen, physics.inspections(unseen)):
-            measurements[n] = plain_measurement(m)
+        cache = {(n,): {k: o[k] for k in TRIAL_OUTCOME_KEYS} for n, o in (first_drops or {}).items()}
+        # an object only the trials use is measured by a drop into a fresh jar: the same look, take, lift and weigh
+        # as an inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it
+        unseen = [n for n in dict.fromkeys(n for stand in objects.trials for n in stand)
+                  if n not in measurements and (n,) not in cache]
+        for n, (outcome,) in zip(unseen, physics.run([("trial", (n,), None) for n in unseen])):
+            cache[(n,)] = outcome_dict(outcome)
+        measurements.update({s[0]: o["measurement"] for s, o in cache.items() if s[0] not in measurements})
         archimedes = {n: archimedes_cm3(objects.get(n), objects.jar) for stand in objects.trials for n in stand}
         agent = roomy_copy(exp.agent, sum(len(s) for s in objects.trials))
-        cache = {(n,): {k: o[k] for k in TRIAL_OUTCOME_KEYS} for n, o in (first_drops or {}).items()}
 
         def drop(sequences):
             new = [s for s in dict.fromkeys(sequences) if s not in cache]
