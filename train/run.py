@@ -348,7 +348,6 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
-    from train.tensorboard_log import OrderLog, trial_line
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
 
@@ -371,6 +370,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
                                                         for n in probes]
     probe_drops = {}
     submitted = physics.submit(jobs)   # the workers start on them while the logs open
+    from train.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
                             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
