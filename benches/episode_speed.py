@@ -6,8 +6,11 @@
 2. Per physics step of that episode: the water model (`Water.step`) beside pybullet's own `stepSimulation`.
 3. `python train/run.py` (the default run, `make run`) of this tree beside the same command at --baseline (default
    19ce05e, before the physics was made faster), checked out by `git worktree` into a temporary directory: N runs
-   each, alternately, so both see the same machine; median wall times and their ratio, the same for the part of
-   the run that simulates (as the run reports it), and whether summary.json is the same byte for byte. Skipped (said so) when git or the commit is not available.
+   each, alternately, so both see the same machine; median wall times and their ratio, the same for the run's wait
+   for its 13 exploration simulations (as the run reports it: since the runner hands them to its workers before it
+   opens its logs, the wait leaves out the part that overlaps), and whether summary.json is the same byte for byte
+   (it is not against 19ce05e, which played no goal trials). Skipped (said so) when git or the commit is not
+   available.
 Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`.
 """
 
@@ -76,7 +79,7 @@ def episode() -> float:
 
 
 def default_run(tree: Path, out: Path) -> tuple[float, float]:
-    """(wall s, s of its simulations as the run reports them: worker start-up, world builds, 13 simulations)."""
+    """(wall s, s the run waited for its exploration's simulations, as it reports them)."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.perf_counter()
     log = subprocess.run([sys.executable, "train/run.py", "--out", str(out)], cwd=tree, env=env, check=True,
@@ -107,7 +110,7 @@ def against(commit: str, runs: int) -> float | None:
     sims = {k: statistics.median(s for _, s in v) for k, v in times.items()}
     ratio = med["this tree"] / med[commit]
     print(f"default run (python train/run.py), {runs} runs each, alternately; median wall (all runs), and of it the "
-          f"simulations (workers started, worlds built, 13 simulations):")
+          f"wait for the exploration's simulations (workers started, worlds built, 13 simulations):")
     for name, v in times.items():
         print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{w:.2f}' for w, _ in v)});   simulations "
               f"{sims[name]:5.2f} s   ({', '.join(f'{x:.2f}' for _, x in v)})")
