@@ -4,15 +4,20 @@ per order; right, prediction error against Archimedes over episodes, one curve p
 The left panel shows states, not certainty: dominant and irrelevant both have certainty 1, so a certainty curve
 hides a property flipping from one to the other (and lines of equal certainty sit on top of each other). Each state
 has its own colour and letter, so every flip in every order is a change of cell along a row.
-
-matplotlib is imported where a figure is drawn (0.4 s): the runner draws on a worker process and never needs it.
 """
 
 from __future__ import annotations
 
-import numpy as np
+import matplotlib
 
-from aesop_torch.rules import PROPERTIES, STATES
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.colors import BoundaryNorm, ListedColormap  # noqa: E402
+from matplotlib.patches import Patch  # noqa: E402
+from matplotlib.ticker import MaxNLocator  # noqa: E402
+
+from aesop_torch.rules import PROPERTIES, STATES  # noqa: E402
 
 MAX_CURVES = 12  # orders drawn (rows per property on the left, curves on the right); a person reads about this many
 # one colour per rules.STATES entry, in its order: grey = nothing known, pale orange = leaning irrelevant,
@@ -40,13 +45,6 @@ def state_grid(runs: list[list[dict]]) -> tuple[np.ndarray, list[str]]:
 
 def figure2(runs: list[list[dict]]):
     """runs: per order, the episode records of summary.json. Returns a matplotlib Figure."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import BoundaryNorm, ListedColormap
-    from matplotlib.patches import Patch
-    from matplotlib.ticker import MaxNLocator
-
     grid, labels = state_grid(runs)
     n_rows, n_eps = grid.shape
     fig, (left, right) = plt.subplots(1, 2, figsize=(12, max(4.6, 1.2 + 0.16 * n_rows)),
@@ -89,8 +87,6 @@ def figure2(runs: list[list[dict]]):
 def save_figure2(runs: list[list[dict]], path, dpi: int = 110) -> np.ndarray:
     """figure2(runs) drawn once: written to `path` as PNG (the bytes `savefig(path, dpi=dpi)` writes) and returned
     as pixels, (H, W, 3) uint8, for tensorboard. The runner calls it on a worker while the goal trials play."""
-    import matplotlib.pyplot as plt
-
     fig = figure2(runs)
     try:
         fig.set_dpi(dpi)
