@@ -9,8 +9,9 @@
    each, alternately, so both see the same machine; median wall times and their ratio, the same for the run's wait
    for its 13 exploration simulations (as the run reports it: since the runner hands them to its workers before it
    opens its logs, the wait leaves out the part that overlaps), and whether summary.json is the same byte for byte
-   (it is not against 19ce05e, which played no goal trials). Skipped (said so) when git or the commit is not
-   available.
+   (it is not against 19ce05e, which played no goal trials), with the 1-minute load average while they ran: the
+   ratio depends on the machine's other jobs (19ce05e needs more CPU, so it loses more on a busy machine). Skipped
+   (said so) when git or the commit is not available.
 Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`.
 """
 
@@ -99,9 +100,11 @@ def against(commit: str, runs: int) -> float | None:
             return None
         try:
             times = {"this tree": [], commit: []}
+            load = [os.getloadavg()[0]]   # the other jobs on the machine: the ratio depends on them
             for i in range(runs):
                 for name, tree in (("this tree", ROOT), (commit, base)):
                     times[name].append(default_run(tree, Path(tmp) / f"{name.replace(' ', '_')}_{i}"))
+                    load.append(os.getloadavg()[0])
             same = filecmp.cmp(Path(tmp) / f"this_tree_{runs - 1}" / "summary.json",
                                Path(tmp) / f"{commit}_{runs - 1}" / "summary.json", shallow=False)
         finally:
@@ -109,8 +112,9 @@ def against(commit: str, runs: int) -> float | None:
     med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
     sims = {k: statistics.median(s for _, s in v) for k, v in times.items()}
     ratio = med["this tree"] / med[commit]
-    print(f"default run (python train/run.py), {runs} runs each, alternately; median wall (all runs), and of it the "
-          f"wait for the exploration's simulations (workers started, worlds built, 13 simulations):")
+    print(f"default run (python train/run.py), {runs} runs each, alternately (1-minute load average "
+          f"{min(load):.1f}-{max(load):.1f}); median wall (all runs), and of it the wait for the exploration's "
+          f"simulations (workers started, worlds built, 13 simulations):")
     for name, v in times.items():
         print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{w:.2f}' for w, _ in v)});   simulations "
               f"{sims[name]:5.2f} s   ({', '.join(f'{x:.2f}' for _, x in v)})")
