@@ -7,15 +7,16 @@ makes the physics embarrassingly parallel: the profile of a default run showed t
 independent simulations) taking 9 of its 12 s, so they run on every core at once, and so do the goal trials' drop
 sequences (each round's new ones at once). Each worker builds its world once.
 
-`start` forks the workers as soon as the runner knows what to simulate, and `submit` hands them jobs without waiting,
-so the runner writes its first checkpoint and opens its logs while they import the simulator, build their worlds and
-simulate. `call` runs any other function there (the runner draws its figure on a worker while the trials play).
+`submit` hands the workers jobs without waiting (forking them first if need be), so the runner opens its logs while
+they build their worlds and simulate; `call` runs any other function there (the runner draws its figure on a worker
+while the trials play). The pool lives until `close`.
 
 On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
-pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them
-already (`start` imports the simulator just before it forks: once, not once per worker). It is safe here: the runner holds no pybullet client (a GUI simulates in-process), and a worker's torch runs
-on one thread (`_init`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy
-on two threads and a tensorboard writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
+pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them already
+(`start` imports the simulator just before it forks: once, not once per worker). It is safe here: the runner holds
+no pybullet client (a GUI simulates in-process), and a worker's torch runs on one thread (`_init`), so it never
+waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
+writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
 Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
 imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
