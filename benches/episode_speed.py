@@ -6,8 +6,12 @@
 2. Per physics step of that episode: the water model (`Water.step`) beside pybullet's own `stepSimulation`.
 3. `python train/run.py` (the default run, `make run`) of this tree beside the same command at --baseline (default
    19ce05e, before the physics was made faster), checked out by `git worktree` into a temporary directory: N runs
-   each, alternately, so both see the same machine; median wall times and their ratio, the same for the part of
-   the run that simulates (as the run reports it), and whether summary.json is the same byte for byte. Skipped (said so) when git or the commit is not available.
+   each, alternately, so both see the same machine; median wall times and their ratio, the same for the run's wait
+   for its 13 exploration simulations (as the run reports it: since the runner hands them to its workers before it
+   opens its logs, the wait leaves out the part that overlaps), and whether summary.json is the same byte for byte
+   (it is not against 19ce05e, which played no goal trials), with the 1-minute load average while they ran: the
+   ratio depends on the machine's other jobs (19ce05e needs more CPU, so it loses more on a busy machine). Skipped
+   (said so) when git or the commit is not available.
 Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`.
 """
 
@@ -76,7 +80,7 @@ def episode() -> float:
 
 
 def default_run(tree: Path, out: Path) -> tuple[float, float]:
-    """(wall s, s of its simulations as the run reports them: worker start-up, world builds, 13 simulations)."""
+    """(wall s, s the run waited for its exploration's simulations, as it reports them)."""
     env = dict(os.environ, PYTHONPATH=str(tree))
     t0 = time.perf_counter()
     log = subprocess.run([sys.executable, "train/run.py", "--out", str(out)], cwd=tree, env=env, check=True,
@@ -96,9 +100,11 @@ def against(commit: str, runs: int) -> float | None:
             return None
         try:
             times = {"this tree": [], commit: []}
+            load = [os.getloadavg()[0]]   # the other jobs on the machine: the ratio depends on them
             for i in range(runs):
                 for name, tree in (("this tree", ROOT), (commit, base)):
                     times[name].append(default_run(tree, Path(tmp) / f"{name.replace(' ', '_')}_{i}"))
+                    load.append(os.getloadavg()[0])
             same = filecmp.cmp(Path(tmp) / f"this_tree_{runs - 1}" / "summary.json",
                                Path(tmp) / f"{commit}_{runs - 1}" / "summary.json", shallow=False)
         finally:
@@ -106,7 +112,8 @@ def against(commit: str, runs: int) -> float | None:
     med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
     sims = {k: statistics.median(s for _, s in v) for k, v in times.items()}
     ratio = med["this tree"] / med[commit]
-    print(f"default run (python train/run.py), {runs} runs each, alternately; median wall (all runs), and of it the "
+    print(f"default run (python train/run.py), {runs} runs each, alternately (1-minute load average "
+          f"{min(load):.1f}-{max(load):.1f}); median wall (all runs), and of it the wait for the exploration's "
           f"simulations (workers started, worlds built, 13 simulations):")
     for name, v in times.items():
         print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{w:.2f}' for w, _ in v)});   simulations "

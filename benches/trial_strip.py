@@ -28,19 +28,20 @@ def main(argv=None) -> None:
     import matplotlib.pyplot as plt
 
     from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSet, load_objects
-    from sim.trial import PhysicsTrials
     from train.experiment import load_experiment
+    from train.physics import Physics
     from train.trials import play_trials
 
     objects = load_objects(DEFAULT_OBJECTS_FILE)
     one = ObjectSet(objects.jar, objects.train, objects.probe, objects.pool, [objects.trials[a.trial - 1]])
     exp = load_experiment(a.checkpoint)
-    world = PhysicsTrials(one, seed=exp.seed, record=True)
+    physics = Physics(one, seed=exp.seed, workers=1)
     try:
-        rec = play_trials(exp, one, world_trials=world)[0][0]
-        outs = [world.outcome(tuple(rec["chosen"][:k + 1])) for k in range(len(rec["chosen"]))]
+        rec = play_trials(exp, one, physics)[0][0]
+        # the agent's drops again, filmed: every sequence starts from a fresh jar, so they are the same drops
+        (outs,) = physics.run([("trial", tuple(rec["chosen"]), True)])
     finally:
-        world.close()
+        physics.close()
     per_drop = 4
     fig, axes = plt.subplots(len(outs), per_drop, figsize=(2.2 * per_drop, 1.9 * len(outs) + 0.4), squeeze=False)
     for k, (o, name) in enumerate(zip(outs, rec["chosen"])):

@@ -94,18 +94,19 @@ def heaviest_first(masses) -> int:
 
 
 def closed_form_drop(outcomes: dict, need_cm3: float):
-    """A trial's drops without physics: drop(b, sequence) -> what the world reports for the last drop of `sequence`.
+    """A trial's drops without physics: drop(sequences) -> per sequence, what the world reports for its last drop
+    (train.trials.run_trials' drop).
 
     outcomes: name -> that object's exploration outcome (train.experiment.outcome_record or closed_form_outcomes):
     its observed_cm3 (sensed, or Archimedes) and sank are reused, displacements add up in the jar, and the ball is
     reachable once their sum reaches need_cm3 (reach_cm3)."""
-    def drop(b: int, sequence) -> dict:
+    def one(sequence) -> dict:
         *before, last = sequence
         total = sum(float(outcomes[n]["observed_cm3"]) for n in before)
         o = outcomes[last]
         return {"observed_cm3": float(o["observed_cm3"]), "goal_before": total >= need_cm3,
                 "goal_after": total + float(o["observed_cm3"]) >= need_cm3, "sank": bool(o["sank"])}
-    return drop
+    return lambda sequences: [one(s) for s in sequences]
 
 
 # -- physics --------------------------------------------------------------------------------------------------------
@@ -122,36 +123,7 @@ def drop_next(world, name: str, record=None):
 
 
 def simulate_sequence(world, names, record=None) -> list:
-    """Drop `names` one after another into a fresh jar (World.reset, then World.drop_next each): their outcomes."""
+    """Drop `names` one after another into a fresh jar (World.reset, then World.drop_next each): their outcomes. The
+    runner simulates a trial's sequences this way on its worker pool (train/physics.py, train/trials.py)."""
     world.reset()
     return [world.drop_next(n, record) for n in names]
-
-
-class PhysicsTrials:
-    """Drops of goal trials in one pybullet world, cached by the sequence dropped so far: a drop's outcome depends
-    on the objects already in the jar, and agents that chose alike share it. Each new sequence is simulated from a
-    fresh jar (a prefix of k drops costs k drops)."""
-
-    def __init__(self, objects, seed: int = 0, record: bool = False):
-        self.objects, self.seed, self.record = objects, seed, record
-        self.world, self.cache = None, {}
-        self.frames = {}    # sequence -> frames of its last drop, when recording
-
-    def outcome(self, sequence: tuple):
-        """The outcome (sim.episode.EpisodeOutcome) of the last drop of `sequence`, the earlier ones before it."""
-        sequence = tuple(sequence)
-        if self.world is None:
-            from sim.world import World
-            self.world = World(self.objects, seed=self.seed)
-        if not sequence:
-            return None
-        if sequence not in self.cache:
-            outs = simulate_sequence(self.world, sequence, self.record or None)
-            for k in range(1, len(sequence) + 1):
-                self.cache.setdefault(sequence[:k], outs[k - 1])
-        return self.cache[sequence]
-
-    def close(self):
-        if self.world is not None:
-            self.world.close()
-            self.world = None

@@ -34,20 +34,29 @@ class FakePhysics:
         self.workers = 1
         self.outcomes, self.probes = closed_form_outcomes(objects)
 
-    def run(self, jobs, progress=None):
+    def submit(self, jobs):
+        return map(self._answer, jobs)
+
+    def _answer(self, job):
+        kind, name, _ = job
+        if kind == "inspect":
+            return self.probes[name]["measurement"]
+        o = self.outcomes[name]
+        return types.SimpleNamespace(measurement=o["measurement"], observed_cm3=o["observed_cm3"],
+                                     archimedes_cm3=o["archimedes_cm3"], goal_reachable_before=o["goal_before"],
+                                     goal_reached_after=o["goal_after"], sank=o["sank"], true=o["true"], frames=None)
+
+    def run(self, jobs, progress=None, submitted=None):
         results = []
-        for kind, name, _ in jobs:
-            if kind == "inspect":
-                results.append(self.probes[name]["measurement"])
-            else:
-                o = self.outcomes[name]
-                results.append(types.SimpleNamespace(
-                    measurement=o["measurement"], observed_cm3=o["observed_cm3"],
-                    archimedes_cm3=o["archimedes_cm3"], goal_reachable_before=o["goal_before"],
-                    goal_reached_after=o["goal_after"], sank=o["sank"], true=o["true"], frames=None))
+        for job, r in zip(jobs, self.submit(jobs) if submitted is None else submitted):
+            results.append(r)
             if progress:
-                progress((kind, name, None))
+                progress(job)
         return results
+
+    def call(self, fn, *args):
+        value = fn(*args)
+        return types.SimpleNamespace(get=lambda: value)
 
     def drops(self, names, record=False, progress=None):
         return self.run([("drop", n, record) for n in names], progress)

@@ -53,10 +53,11 @@ def test_planner_and_random_chooser_by_hand():
 def test_water_accumulates_within_a_trial_closed_form():
     outcomes = {"a": {"observed_cm3": 150.0, "sank": True}, "b": {"observed_cm3": 100.0, "sank": False}}
     drop = closed_form_drop(outcomes, 237.0)
-    assert drop(0, ("a",)) == {"observed_cm3": 150.0, "goal_before": False, "goal_after": False, "sank": True}
-    # the second drop starts from the water the first left: 150 + 100 = 250 >= 237
-    assert drop(0, ("a", "b")) == {"observed_cm3": 100.0, "goal_before": False, "goal_after": True, "sank": False}
-    assert drop(0, ("b",))["goal_after"] is False
+    # one call answers every agent's sequence; the second drop starts from the water the first left: 150 + 100 = 250
+    assert drop([("a",), ("a", "b")]) == [
+        {"observed_cm3": 150.0, "goal_before": False, "goal_after": False, "sank": True},
+        {"observed_cm3": 100.0, "goal_before": False, "goal_after": True, "sank": False}]
+    assert drop([("b",)])[0]["goal_after"] is False
 
 
 def test_objects_file_trials_and_pool():
@@ -137,14 +138,14 @@ def test_choice_rule_by_hand():
 
 
 def test_physics_water_is_not_reset_between_the_drops_of_a_trial():
-    from sim.trial import PhysicsTrials
+    from sim.trial import simulate_sequence
+    from sim.world import World
     objs = load_objects("sim/default_objects.json")
-    trial = PhysicsTrials(objs, seed=0)
+    world = World(objs, seed=0)
     try:
-        first = trial.outcome(("green_heavy_box",))
-        second = trial.outcome(("green_heavy_box", "red_small_heavy_cylinder"))
+        first, second = simulate_sequence(world, ("green_heavy_box", "red_small_heavy_cylinder"))
     finally:
-        trial.close()
+        world.close()
     area = objs.jar.area_cm2
     # the second drop starts at the level the first left (not the start level), and the level keeps both
     assert second.level_before_cm == pytest.approx(first.level_after_cm, abs=0.005)
@@ -154,6 +155,28 @@ def test_physics_water_is_not_reset_between_the_drops_of_a_trial():
     assert (second.level_after_cm - first.level_before_cm) * area == pytest.approx(both, rel=0.03)
     assert second.observed_cm3 == pytest.approx(45.7, rel=0.05) and second.sank
     assert not second.goal_reached_after       # 180 + 46 < 237: still out of reach
+
+
+def test_trials_play_the_same_on_the_worker_pool_as_in_this_process(explored):
+    """The runner simulates the trials' drops on its worker pool, and takes a trial's first drop of an object it
+    dropped in the exploration from there: the same outcomes, bit for bit, as simulating them here."""
+    from train.experiment import outcome_record
+    from train.physics import Physics
+    from train.trials import TRIAL_OUTCOME_KEYS, outcome_dict, play_trials
+    exp, objs, _ = explored
+    here = play_trials(exp, objs, Physics(objs, seed=0, workers=1))   # the pool objects inspected, then dropped
+    assert here[0][0]["chosen"] == ["blue_heavy_cylinder"] and here[0][0]["goal_reached"]
+    pool = Physics(objs, seed=0, workers=2)
+    try:
+        explored_drop, trial_drops = pool.run([("drop", "blue_heavy_cylinder", False),
+                                                ("trial", ("blue_heavy_cylinder",), None)])
+        record = outcome_record(explored_drop)
+        # the exploration's drop and the trial's first drop: the same fresh jar and noise seed, every float equal
+        assert outcome_dict(trial_drops[0]) == {k: record[k] for k in TRIAL_OUTCOME_KEYS}
+        assert play_trials(exp, objs, pool) == here
+        assert play_trials(exp, objs, pool, first_drops={"blue_heavy_cylinder": record}) == here
+    finally:
+        pool.close()
 
 
 # -- words ------------------------------------------------------------------------------------------------------

@@ -100,6 +100,13 @@ def test_inspect_recovers_a_known_object(world):
     assert pos[2] == pytest.approx(world.stand_top + 4.0 * CM, abs=0.005) and abs(orn[3]) > 0.999
 
 
+def test_a_drop_measures_an_object_as_an_inspection_does_bit_for_bit(world, heavy):
+    # the same look, take, lift and weigh before the drop (the runner measures a probe that a trial may drop first
+    # by a drop, and an object only the trials use too): the same measurement, every float equal
+    first, _ = heavy
+    assert _plain(world.inspect("red_heavy_cylinder")) == _plain(first.measurement)
+
+
 def test_an_objects_measurement_depends_on_the_seed_and_the_object_only():
     # bit for bit, whatever was handled before (presentation orders, --resume), and the noise follows the seed
     objects = parse_objects({"train": [

@@ -82,3 +82,17 @@ def figure2(runs: list[list[dict]]):
     right.legend(fontsize=7)
     fig.tight_layout()
     return fig
+
+
+def save_figure2(runs: list[list[dict]], path, dpi: int = 110) -> np.ndarray:
+    """figure2(runs) drawn once: written to `path` as PNG (the bytes `savefig(path, dpi=dpi)` writes) and returned
+    as pixels, (H, W, 3) uint8, for tensorboard. The runner calls it on a worker while the goal trials play."""
+    fig = figure2(runs)
+    try:
+        fig.set_dpi(dpi)
+        fig.canvas.draw()
+        rgba = np.asarray(fig.canvas.buffer_rgba())
+        plt.imsave(path, rgba, format="png", dpi=dpi)
+        return rgba[..., :3].copy()
+    finally:
+        plt.close(fig)

@@ -1,16 +1,22 @@
-"""The runner's access to the simulated world: drops and inspections, spread over worker processes.
+"""The runner's access to the simulated world: drops, inspections and goal-trial drop sequences, on worker processes.
 
 Every drop and every inspection starts from the scene as built (sim/world.py restores it) and seeds its sensor noise
 from (seed, object name), so an object's outcome is the same bit for bit whichever process simulates it and whatever
-it simulated before. That makes the physics embarrassingly parallel: the profile of a default run showed the drops
-and inspections (13 independent simulations) taking 9 of its 12 s, so they run on every core at once. Each worker
-builds its world once.
+it simulated before; a goal trial's sequence of drops starts from a fresh jar the same way (sim/trial.py). That
+makes the physics embarrassingly parallel: the profile of a default run showed the drops and inspections (13
+independent simulations) taking 9 of its 12 s, so they run on every core at once, and so do the goal trials' drop
+sequences (each round's new ones at once). Each worker builds its world once.
+
+`submit` hands the workers jobs without waiting (forking them first if need be), so the runner opens its logs while
+they build their worlds and simulate; `call` runs any other function there (the runner draws its figure on a worker
+while the trials play). The pool lives until `close`.
 
 On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
-pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has torch
-already. It is safe here: the runner holds no pybullet client (a GUI simulates in-process), and a worker's torch runs
-on one thread (`_init`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy
-on two threads and a tensorboard writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
+pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them already
+(`start` imports the simulator just before it forks: once, not once per worker). It is safe here: the runner holds
+no pybullet client (a GUI simulates in-process), and a worker's torch runs on one thread (`_init`), so it never
+waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
+writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
 Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
 imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
@@ -39,10 +45,17 @@ def _init(objects, seed: int) -> None:
 
 
 def _task(job: tuple):
-    kind, name, record = job
+    return _simulate(_WORLD, job)
+
+
+def _simulate(world, job: tuple):
+    kind, what, record = job
     if kind == "inspect":
-        return _WORLD.inspect(name)
-    return _WORLD.run_episode(name, record=record)
+        return world.inspect(what)
+    if kind == "trial":   # a goal trial's drops, `what` in order, from a fresh jar: the outcome of each
+        from sim.trial import simulate_sequence
+        return simulate_sequence(world, what, record or None)
+    return world.run_episode(what, record=record)
 
 
 def cores() -> int:
@@ -50,46 +63,71 @@ def cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+class _Ready:
+    """A result computed in this process, with the interface of the pool's AsyncResult."""
+
+    def __init__(self, value):
+        self.value = value
+
+    def get(self):
+        return self.value
+
+
 class Physics:
-    """Drops and inspections for the runner. workers=1 (or a GUI) simulates in this process."""
+    """Drops, inspections and trial sequences for the runner. workers=1 (or a GUI) simulates in this process, when
+    the results are asked for."""
 
     def __init__(self, objects, seed: int = 0, gui: bool = False, workers: int | None = None):
         self.objects, self.seed, self.gui = objects, seed, gui
         self.workers = 1 if gui else (workers or cores())
-        self._pool = None
+        self._pool = self._world = None
 
-    def run(self, jobs: list[tuple], progress=None) -> list:
-        """jobs: ("drop", name, record) or ("inspect", name, None); results in the same order.
-        progress: optional callable(job) called as each job's result arrives (in job order)."""
-        if not jobs:
-            return []
-        if self.workers == 1 or len(jobs) == 1:
-            global _WORLD
-            if _WORLD is None:
-                from sim.world import World
-                _WORLD = World(self.objects, gui=self.gui, seed=self.seed)
-            results = []
-            for j in jobs:
-                results.append(_task(j))
-                if progress is not None:
-                    progress(j)
-            return results
-        if self._pool is None:
-            ctx = mp.get_context(START_METHOD)
-            main = threading.current_thread() is threading.main_thread()   # only it may set handlers
-            previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
-            try:
-                self._pool = ctx.Pool(min(self.workers, len(jobs)), initializer=_init,
-                                      initargs=(self.objects, self.seed))
-            finally:
-                if main:
-                    signal.signal(signal.SIGINT, previous)
+    def start(self) -> None:
+        """Fork the workers now (each imports the simulator and builds its world while the caller goes on)."""
+        if self.workers == 1 or self._pool is not None:
+            return
+        if START_METHOD == "fork":
+            import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.8 s each)
+        ctx = mp.get_context(START_METHOD)
+        main = threading.current_thread() is threading.main_thread()   # only it may set handlers
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
+        try:
+            self._pool = ctx.Pool(self.workers, initializer=_init, initargs=(self.objects, self.seed))
+        finally:
+            if main:
+                signal.signal(signal.SIGINT, previous)
+
+    def submit(self, jobs: list[tuple]):
+        """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited
+        for as it is taken). jobs: ("drop", name, record), ("inspect", name, None) or ("trial", names, record)."""
+        if self.workers == 1:
+            return map(self._here, jobs)   # lazy: each job is simulated when its result is taken
+        self.start()
+        return self._pool.imap(_task, jobs, chunksize=1)
+
+    def _here(self, job: tuple):
+        if self._world is None:
+            from sim.world import World
+            self._world = World(self.objects, gui=self.gui, seed=self.seed)
+        return _simulate(self._world, job)
+
+    def run(self, jobs: list[tuple], progress=None, submitted=None) -> list:
+        """The jobs' results in job order, waited for. progress: optional callable(job) called as each result
+        arrives. submitted: what submit(jobs) returned, if they were handed over already."""
         results = []
-        for j, r in zip(jobs, self._pool.imap(_task, jobs, chunksize=1)):
+        for j, r in zip(jobs, self.submit(jobs) if submitted is None else submitted):
             results.append(r)
             if progress is not None:
                 progress(j)
         return results
+
+    def call(self, fn, *args):
+        """fn(*args) on a worker (in this process when there are none): an object whose get() waits for the
+        result. fn must be importable by name (it is pickled)."""
+        if self.workers == 1:
+            return _Ready(fn(*args))
+        self.start()
+        return self._pool.apply_async(fn, args)
 
     def drops(self, names: list[str], record: bool = False, progress=None) -> list:
         return self.run([("drop", n, record) for n in names], progress)
@@ -98,11 +136,10 @@ class Physics:
         return self.run([("inspect", n, None) for n in names])
 
     def close(self) -> None:
-        global _WORLD
         if self._pool is not None:
             self._pool.terminate()   # every result is in: the idle workers need no orderly shutdown (0.4 s)
             self._pool.join()
             self._pool = None
-        if _WORLD is not None:
-            _WORLD.close()
-            _WORLD = None
+        if self._world is not None:
+            self._world.close()
+            self._world = None

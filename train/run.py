@@ -348,7 +348,6 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
-    from train.tensorboard_log import OrderLog, trial_line
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders}
 
@@ -358,6 +357,20 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
 
     if not resumed:
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
+    physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)
+    specs = {o.name: o for o in objects.train + objects.probe}
+    # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
+    # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
+    # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
+    # agent learns nothing from it here)
+    todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
+    probes = [n for n in exp.probe_names if n not in exp.probes]
+    on_stands = {n for stand in objects.trials for n in stand}
+    jobs = [("drop", n, args.frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
+                                                        for n in probes]
+    probe_drops = {}
+    submitted = physics.submit(jobs)   # the workers start on them while the logs open
+    from train.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
                             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
@@ -366,9 +379,6 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         for b, log in enumerate(logs):
             log.hparams({**hp, "order": " ".join(exp.train_names[i] for i in exp.orders[b])},
                         {"prediction/probe_rel_error": float("nan")})
-
-    physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)
-    specs = {o.name: o for o in objects.train + objects.probe}
 
     def keep(outcome, tag: str) -> dict:
         if args.frames and outcome.frames:
@@ -380,17 +390,15 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
                     bar.update()
         return outcome_record(outcome)
 
-    # probes are inspected once; with cached physics every distinct train object is dropped once, all up front
-    todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
-    probes = [n for n in exp.probe_names if n not in exp.probes]
-    if todo or probes:
-        jobs = [("drop", n, args.frames) for n in todo] + [("inspect", n, None) for n in probes]
-        with Step(f"simulating {len(todo)} drop(s) and {len(probes)} probe inspection(s) on {physics.workers} "
+    if jobs:
+        with Step(f"simulating {len(todo)} drop(s) and {len(probes)} probe measurement(s) on {physics.workers} "
                   f"process(es)", len(jobs), "simulation") as bar:
-            results = physics.run(jobs, progress=lambda job: bar.update(1, job[1]))
+            results = physics.run(jobs, progress=lambda job: bar.update(1, job[1]), submitted=submitted)
         for name, outcome in zip(todo, results):
             exp.outcomes[name] = keep(outcome, name)
         for name, m in zip(probes, results[len(todo):]):
+            if name in on_stands:
+                probe_drops[name], m = outcome_record(m), m.measurement
             exp.probes[name] = {"measurement": plain_measurement(m),
                                 "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
         checkpoint()
@@ -419,9 +427,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
             if not per_episode:
                 bar.update(1, recs[0]["object"])
-    physics.close()
-    _OPEN["physics"] = None
-
+    # Figure 2 shows the exploration: drawn and written on a worker while the population and the goal trials run
+    from train.figures import save_figure2
+    figure = physics.call(save_figure2, exp.records, out / "figure2.png")
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
     if len(orders) > len(exp.orders):
@@ -437,22 +445,22 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
               "not reset between the drops of a trial (each new sequence of drops simulated from a fresh jar)",
               flush=True)
         with Step("goal trials", None, "drop", announce=False) as bar:
-            exp.trials = play_trials(exp, objects, progress=lambda seq: bar.update(1, " > ".join(seq)))
+            # a trial's first drop of an object is the drop that measured it here (a fresh jar, the same noise seed)
+            exp.trials = play_trials(exp, objects, physics, first_drops={**exp.outcomes, **probe_drops},
+                                     progress=lambda seq: bar.update(1, " > ".join(seq)))
         for i, r in enumerate(exp.trials[0]):
             print(trial_line(i, r), flush=True)
         for b, log in enumerate(logs):
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
     summary = build_summary(exp, population)
-    from train.figures import figure2
-    fig = figure2(exp.records)
-    fig.savefig(out / "figure2.png", dpi=110)
-    from torch.utils.tensorboard._utils import figure_to_image
-    image = figure_to_image(fig)   # drawn once, written to every order's log (add_figure would draw it per log)
+    image = figure.get()
     for log in logs:
-        log.writer.add_image("figure2", image, exp.n_episodes)
+        log.writer.add_image("figure2", image, exp.n_episodes, dataformats="HWC")
         log.close()
     _OPEN["logs"] = []
+    physics.close()
+    _OPEN["physics"] = None
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
@@ -471,4 +479,9 @@ def _flat(prefix: str, d: dict) -> dict:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    code = main()
+    # everything is written and closed: spare the interpreter's last garbage collection, a walk over torch's objects
+    # that took ~0.7 s of the default run's exit (the memory goes back to the system with the process anyway)
+    import gc
+    gc.freeze()
+    sys.exit(code)

@@ -108,8 +108,9 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
     """Play every trial in turn with each of the agent's B agents (learning on, carried from trial to trial).
 
     stands: per trial the names on the stand. measurements: name -> plain measurement (the candidate lifted and
-    weighed). drop(b, sequence) -> {"observed_cm3", "goal_before", "goal_after", "sank"[, "measurement"]}: what the
-    world reports for the last drop of `sequence` (agent b's drops so far in this trial, in order). archimedes:
+    weighed). drop(sequences) -> per sequence {"observed_cm3", "goal_before", "goal_after", "sank"[, "measurement"]}:
+    what the world reports for the last drop of each sequence (an agent's drops so far in this trial, in order; one
+    call per round with the sequence of every agent still playing, so the world can simulate them together). archimedes:
     name -> true displacement, for the planner and the random chooser only. names: the teacher names each object
     as it is presented (its name as words). goals: per trial the teacher's goal phrase (None: DEFAULT_GOAL); a
     phrase that names no goal is refused (ValueError) before any trial is played. Returns per agent the list of
@@ -164,7 +165,10 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
                     r["explored"].append(explored)
                     left[b].pop(k)
                     seq[b].append(picks[b])
-            outs = [drop(b, tuple(seq[b])) if active[b] else None for b in range(B)]
+            playing = [b for b in range(B) if active[b]]
+            outs = [None] * B
+            for b, o in zip(playing, drop([tuple(seq[b]) for b in playing])):
+                outs[b] = o
             learn = torch.tensor(active)
             filler = next(o for o in outs if o is not None)
             outs_or = [o if o is not None else filler for o in outs]
@@ -205,45 +209,59 @@ def _with_names(ms: list[dict], names: list[str], on: bool) -> dict:
     return out
 
 
+TRIAL_OUTCOME_KEYS = ("observed_cm3", "goal_before", "goal_after", "sank", "measurement")
+
+
 def outcome_dict(outcome) -> dict:
-    """The part of a world EpisodeOutcome a trial keeps."""
+    """The part of a world EpisodeOutcome a trial keeps (TRIAL_OUTCOME_KEYS)."""
     from train.experiment import plain_measurement
     return {"observed_cm3": float(outcome.observed_cm3), "goal_before": bool(outcome.goal_reachable_before),
             "goal_after": bool(outcome.goal_reached_after), "sank": bool(outcome.sank),
             "measurement": plain_measurement(outcome.measurement)}
 
 
-def play_trials(exp, objects, world_trials=None, progress=None) -> list[list[dict]]:
+def play_trials(exp, objects, physics=None, first_drops: dict | None = None, progress=None) -> list[list[dict]]:
     """The runner's goal trials: every trial of the objects file with every order's agent, in the simulated world
-    (sim.trial.PhysicsTrials: each drop into the jar as earlier drops left it, the IK reach test after each). A
-    candidate is lifted and weighed as in the exploration (its measurement from there, or inspected here for an
-    object only trials use). world_trials: a PhysicsTrials (default: one for the file and the run's seed)."""
-    from sim.objects import archimedes_cm3
-    from sim.trial import PhysicsTrials
-    from train.experiment import plain_measurement
+    (each drop into the jar as earlier drops of the trial left it, the IK reach test after each). A candidate is
+    lifted and weighed as in the exploration (its measurement from there, or from a drop here for an object only
+    trials use).
 
-    own = world_trials is None
-    world = PhysicsTrials(objects, seed=exp.seed) if own else world_trials
+    Drops are cached by the sequence dropped so far in the trial (agents that chose alike share them); each round's
+    new sequences are simulated together on `physics` (train.physics.Physics: the runner's worker pool; default one
+    in this process, closed after), each from a fresh jar. first_drops: name -> outcome record of that object dropped
+    into a fresh jar of this world with this seed (the runner's cached exploration drops, and the drops that measured
+    its probes that wait on a stand): a trial's first drop of it is that same drop, bit for bit
+    (tests/test_trials.py), so it is not simulated again."""
+    from sim.objects import archimedes_cm3
+    from train.physics import Physics
+
+    own = physics is None
+    physics = Physics(objects, seed=exp.seed, workers=1) if own else physics
     try:
         measurements = {n: o["measurement"] for n, o in exp.outcomes.items()}
         measurements.update({n: p["measurement"] for n, p in exp.probes.items()})
-        for stand in objects.trials:
-            for n in stand:
-                if n not in measurements:
-                    if world.world is None:
-                        world.outcome(())   # builds the world
-                    measurements[n] = plain_measurement(world.world.inspect(n))
+        cache = {(n,): {k: o[k] for k in TRIAL_OUTCOME_KEYS} for n, o in (first_drops or {}).items()}
+        # an object only the trials use is measured by a drop into a fresh jar: the same look, take, lift and weigh
+        # as an inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it
+        unseen = [n for n in dict.fromkeys(n for stand in objects.trials for n in stand)
+                  if n not in measurements and (n,) not in cache]
+        for n, (outcome,) in zip(unseen, physics.run([("trial", (n,), None) for n in unseen])):
+            cache[(n,)] = outcome_dict(outcome)
+        measurements.update({s[0]: o["measurement"] for s, o in cache.items() if s[0] not in measurements})
         archimedes = {n: archimedes_cm3(objects.get(n), objects.jar) for stand in objects.trials for n in stand}
         agent = roomy_copy(exp.agent, sum(len(s) for s in objects.trials))
 
-        def drop(b, sequence):
-            out = outcome_dict(world.outcome(sequence))
-            if progress is not None:
-                progress(sequence)
-            return out
+        def drop(sequences):
+            new = [s for s in dict.fromkeys(sequences) if s not in cache]
+            for s, outs in zip(new, physics.run([("trial", s, None) for s in new])):
+                for k in range(1, len(s) + 1):
+                    cache.setdefault(s[:k], outcome_dict(outs[k - 1]))
+            for s in sequences if progress is not None else ():
+                progress(s)
+            return [cache[s] for s in sequences]
 
         return run_trials(agent, objects.trials, measurements, drop, objects.jar, archimedes, seed=exp.seed,
                           goals=objects.goals)
     finally:
         if own:
-            world.close()
+            physics.close()
