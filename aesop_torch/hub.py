@@ -68,7 +68,8 @@ class ObjectHub(nn.Module):
 
     buffers: strength (B, P) pathway gates (init 1), usage (B, N) assemblies per neuron, assemblies
     (B, max_assemblies, N) bool the stored assemblies, branches (B, max_assemblies, P, U_max) each one's stored
-    patterns, branch_norm (B, max_assemblies, P) their energies, n_assemblies (B,). W (B, P, U_max, N), the
+    patterns, branch_norm (B, max_assemblies, P) their energies, graded (B, max_assemblies) bool stored as a graded
+    bump (else the binary rule's one unit), n_assemblies (B,). W (B, P, U_max, N), the
     connections from the maps onto each hub neuron, is their union (a property, for inspection).
     """
 
@@ -91,6 +92,7 @@ class ObjectHub(nn.Module):
         # each stored object's own patterns (its branch on its neurons) and their energies
         self.register_buffer("branches", torch.zeros(batch, c.max_assemblies, P, U))
         self.register_buffer("branch_norm", torch.zeros(batch, c.max_assemblies, P))
+        self.register_buffer("graded", torch.zeros(batch, c.max_assemblies, dtype=torch.bool))
         self.register_buffer("assemblies", torch.zeros(batch, c.max_assemblies, N, dtype=torch.bool))
         self.register_buffer("n_assemblies", torch.zeros(batch, dtype=torch.long))
 
@@ -125,11 +127,15 @@ class ObjectHub(nn.Module):
         """Maps -> hub. acts (B, P, U_max) graded map activities, present (B, P) maps with input -> (B, N) in [0, 1].
 
         u_k = max over the stored objects o whose assembly holds k of sum_m s_m d_om / sum_m s_m over the present
-        maps o was stored with, where d_om = (a_m . W_om) / (W_om . W_om), clamped to [0, 1], is how well map m's
-        activity a_m (relative to its peak, see HubConfig.relative_activity) matches the pattern W_om stored for o:
-        1 when the stored object is shown again, falling off smoothly as its value moves away. With four equal
-        strengths, one property changed to a clearly different value gives 0.75. A map with strength 0 drops out of
-        both sums: it neither helps nor hurts.
+        maps o was stored with, where d_om = (a_m . W_om) / max(a_m . a_m, W_om . W_om) is how well map m's
+        activity a_m (relative to its peak, see HubConfig.relative_activity, and below store_floor dropped, as a
+        branch holds it) matches the pattern W_om stored for o: 1 only when the stored pattern is shown again
+        (Cauchy-Schwarz), falling off smoothly as its value moves away, and the same for o seen as a against a seen
+        as o. (Divided by W . W alone, an input wider than a stored bump, or shifted into its wide side, scored 1 on
+        it: two distinct objects cued each other's episodes as strongly as their own.) A branch of the binary rule
+        holds one unit at 1 whatever the input's width, so there a_m counts as energy 1: d_om = a_m at the stored
+        winner. With four equal strengths, one property changed to a clearly different value gives 0.75. A map with
+        strength 0 drops out of both sums: it neither helps nor hurts.
 
         Each object's patterns sit on a branch of its own on each of its neurons (dendritic branches): a neuron
         that codes for several objects fires as much as the best-matching of them, never for a mixture of their
@@ -147,7 +153,12 @@ class ObjectHub(nn.Module):
         acts, present = self._check(acts, present)
         if self.config.relative_activity:
             acts = _relative(acts)
-        drive = torch.einsum("bpu,bapu->bap", acts, self.branches) / self.branch_norm.clamp_min(1e-12)
+        # the input as a graded branch holds a pattern (nothing below store_floor), and its energy: a binary branch
+        # holds one unit at 1 whatever the input's width, so its input counts as energy 1
+        acts = torch.where(acts >= self.config.store_floor, acts, torch.zeros_like(acts))
+        energy = torch.where(self.graded[..., None], (acts ** 2).sum(-1)[:, None, :], torch.ones_like(self.branch_norm))
+        drive = torch.einsum("bpu,bapu->bap", acts, self.branches) / torch.maximum(self.branch_norm, energy) \
+            .clamp_min(1e-12)
         gate = self.strength[:, None, :] * present[:, None, :] * (self.branch_norm > 0)   # (B, A, P)
         den = gate.sum(-1)
         return torch.where(den > 0, (gate * drive.clamp(0.0, 1.0)).sum(-1) / den.clamp_min(1e-12),
@@ -252,6 +263,7 @@ class ObjectHub(nn.Module):
         stored = pattern * active[:, :, None]
         self.branches[rows, slot[mask]] = stored[mask]
         self.branch_norm[rows, slot[mask]] = (stored[mask] ** 2).sum(-1)
+        self.graded[rows, slot[mask]] = graded
         self.n_assemblies += mask.long()
         return assembly
 

@@ -92,11 +92,12 @@ class MemoryConfig:
     zscore: bool = True
     # graded recall: every episode the cue touches at all is brought back (strongest first, up to max_recalls), and
     # whoever uses it weighs it by its strength (the agent's readout and rules do). Below this the cue shares
-    # nothing with the retrieved state: float rounding, not a memory. (At 0.05, an object unlike every stored one in
-    # all four properties recalled nothing, and which pairs the rules compared then depended on the order the
-    # objects came in: measured on generated sets of seeds 1000-1039, 87.5 % of sets agreed in all 24 orders at
-    # 0.05, 97.5 % at 0.001.)
-    min_strength: float = 0.001
+    # nothing with the retrieved state: float rounding, not a memory (the weakest real overlap of two stored bumps,
+    # their 0.05 floors through a pathway at 0.05, is ~1e-5). Any higher bound cuts pairs of objects that share
+    # little, and which pairs the rules compared then depended on the order the objects came in: generated sets of
+    # seeds 1000-1039 agreed in all 24 orders in 87.5 % at 0.05, 97.5 % at 0.001; seeds 1000-1099 at 0.001 lost
+    # two more sets, whose sinkers cued each other at 0.0009 one way and 0.0016 the other.
+    min_strength: float = 1e-6
     # most episodes recalled for one cue, a bound for speed: the default experiment encodes at most its 8 training
     # objects, so it never cuts a recall there (longer runs recall their 8 strongest).
     max_recalls: int = 8

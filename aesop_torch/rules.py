@@ -68,9 +68,10 @@ class RulesConfig:
     # grows with every firing and never reaches 1 on its own.
     certainty_step: float = 0.3
     # DeltaContradiction, with a dead zone between "as expected" and "contradicted": a comparison whose outcome falls
-    # between them says nothing and is left out. As expected: within max(same_abs, same_rel x expected); the level
+    # between them says nothing and is left out. As expected: within max(same_abs, same_rel x the larger of the
+    # observed and the expected outcome, so that a against b reads as b against a); the level
     # is read to 0.01 mm (0.1 cm^3 in a 12 cm jar) and the simulated water settles within ~0.5 % of Archimedes.
-    # Contradicted: off by more than max(abs, rel x expected). The zone keeps the rules from reading a property's
+    # Contradicted: off by more than max(abs, rel x the larger). The zone keeps the rules from reading a property's
     # change below what the maps can see as a change of outcome, and the reverse (AgentConfig.delta_p_band): a mass
     # or size change the maps call a change moves a displacement by more than 20 %, one they call no change by less
     # than 5 %, in every context; the paper's contradiction (365 vs 24 cm^3) is 93 %.
@@ -80,15 +81,21 @@ class RulesConfig:
     contradiction_rel: float = 0.2
 
 
+def _scale(observed: torch.Tensor, expected: torch.Tensor) -> torch.Tensor:
+    """The relative tolerances' base: the larger of the two outcomes, so that comparing a with b reads the same as
+    comparing b with a (which of two objects came first cannot change what their comparison says)."""
+    return torch.maximum(observed.abs(), expected.abs())
+
+
 def contradiction(observed: torch.Tensor, expected: torch.Tensor, cfg: RulesConfig) -> torch.Tensor:
     """DeltaContradiction per agent; False where nothing was expected (NaN), since nothing can be contradicted."""
-    tol = torch.clamp(cfg.contradiction_rel * expected.abs(), min=cfg.contradiction_abs_cm3)
+    tol = torch.clamp(cfg.contradiction_rel * _scale(observed, expected), min=cfg.contradiction_abs_cm3)
     return ((observed - expected).abs() > tol) & ~torch.isnan(expected)
 
 
 def outcome_unclear(observed: torch.Tensor, expected: torch.Tensor, cfg: RulesConfig) -> torch.Tensor:
     """True where the outcome is neither as expected nor contradicted (the dead zone between the two tolerances)."""
-    same = torch.clamp(cfg.same_rel * expected.abs(), min=cfg.same_abs_cm3)
+    same = torch.clamp(cfg.same_rel * _scale(observed, expected), min=cfg.same_abs_cm3)
     return ((observed - expected).abs() > same) & ~contradiction(observed, expected, cfg) & ~torch.isnan(expected)
 
 

@@ -246,11 +246,27 @@ def test_graded_storage_keeps_the_bump_and_matches_it_again():
     assert hub.W[0, 1, :, k].tolist() == pytest.approx([0.0, 0.0, 0.5, 1.0, 0.5])
     present = torch.ones(1, 2, dtype=torch.bool)
     assert hub.bottom_up(bump, present)[0, assembly[0]].tolist() == pytest.approx([1.0] * 5)
-    # map a's bump moved one unit: its match is (W . a') / (W . W) = (0.3 + 0.3) / 1.18, map b still 1
+    # map a's bump moved one unit (its 0.02 below the floor): its match is (W . a') / max(a' . a', W . W)
+    # = (0.3 + 0.3) / 1.18, map b still 1
     moved = bump.clone()
     moved[0, 0] = torch.tensor([0.0, 0.02, 0.3, 1.0, 0.3])
-    expect = (0.5 * (0.3 * 0.02 + 1.0 * 0.3 + 0.3 * 1.0) / 1.18 + 0.5 * 1.0)
+    expect = (0.5 * (1.0 * 0.3 + 0.3 * 1.0) / 1.18 + 0.5 * 1.0)
     assert hub.bottom_up(moved, present)[0, k].item() == pytest.approx(expect, rel=1e-5)
+
+
+def test_an_input_that_covers_a_stored_bump_is_not_that_object():
+    """A wider bump holds the stored one under it: W . a > W . W. Divided by the larger energy it scores
+    (W . a) / (a . a) = (0.24 + 1 + 0.24) / 2.78, not 1, and the two objects match each other alike."""
+    narrow = torch.tensor([[[0.0, 0.3, 1.0, 0.3, 0.0]]])
+    wide = torch.tensor([[[0.5, 0.8, 1.0, 0.8, 0.5]]])
+    present, mask = torch.ones(1, 1, dtype=torch.bool), torch.ones(1, dtype=torch.bool)
+    scores = []
+    for stored, shown in ((narrow, wide), (wide, narrow)):
+        hub = ObjectHub({"a": 5}, HubConfig(assembly_size=5), batch=1)
+        hub.allocate(stored, present, mask)
+        assert hub.object_match(stored, present)[0, 0].item() == pytest.approx(1.0)
+        scores.append(hub.object_match(shown, present)[0, 0].item())
+    assert scores == pytest.approx([1.48 / 2.78] * 2, rel=1e-5)
 
 
 @pytest.mark.parametrize("hub", [ActionHub(), BodyHub(), Fate()])

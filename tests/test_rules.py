@@ -27,12 +27,17 @@ def fire(rules, changed, contradicted, strength=None, compared=True, context=MIX
 def test_contradiction_tolerance():
     cfg = RulesConfig()
     obs = torch.tensor([365.0, 24.0, 365.0, 50.0, 10.0])
-    exp = torch.tensor([364.0, 365.0, float("nan"), 40.0, 8.0])
-    # 1 off: as expected; 341 off: contradiction; nothing expected: nothing to contradict; 10 off of 40 (25 %):
-    # contradiction (> 20 %); 2 off of 8 is within the 3 cm^3 absolute reading tolerance
+    exp = torch.tensor([364.0, 365.0, float("nan"), 38.0, 8.0])
+    # 1 off: as expected; 341 off: contradiction; nothing expected: nothing to contradict; 12 off, 24 % of the
+    # larger (50): contradiction (> 20 %); 2 off of 10 is within the 3 cm^3 absolute reading tolerance
     assert contradiction(obs, exp, cfg).tolist() == [False, True, False, True, False]
     # between as expected (max(1 cm^3, 5 %)) and contradicted (max(3 cm^3, 20 %)): the dead zone
     assert outcome_unclear(obs, exp, cfg).tolist() == [False, False, False, False, True]
+    # relative to the larger of the two: a against b reads as b against a
+    seen = ~torch.isnan(exp)
+    assert contradiction(exp[seen], obs[seen], cfg).tolist() == contradiction(obs, exp, cfg)[seen].tolist()
+    assert outcome_unclear(exp[seen], obs[seen], cfg).tolist() == outcome_unclear(obs, exp, cfg)[seen].tolist()
+    assert not contradiction(torch.tensor([50.0]), torch.tensor([40.0]), cfg).item()      # 10 of 50: 20 %, not more
     assert outcome_unclear(torch.tensor([100.0]), torch.tensor([90.0]), cfg).item()        # 10 % off
     assert not outcome_unclear(torch.tensor([100.0]), torch.tensor([96.0]), cfg).item()    # 4 %: as expected
 
