@@ -244,3 +244,36 @@ def test_a_lifetime_of_objects_is_recalled_exactly_and_a_novel_one_finds_its_nea
     recall = agent.anticipate(cylinder(RED, 5.0, 8.0, 28.0)[0]).recall           # between 20 g and 40 g at 5 cm
     first_two = {int((stored == recall.episodes[0, k]).flatten(1).all(1).nonzero()) for k in range(2)}
     assert first_two == {grid.index((5.0, 20.0)), grid.index((5.0, 40.0))}
+
+
+def test_an_object_like_a_stored_one_in_three_maps_gets_an_assembly_of_its_own():
+    """With the match threshold at 0.5 the hub alone would take a 40 g cylinder for the stored 420 g one: three of
+    four maps are the same, a match of 3/4. Its weight differs from what that assembly retro-activates
+    (DeltaProperty), so it is another object. The same cylinder measured again is the same object."""
+    cfg = AgentConfig(seed=0)
+    cfg.hub.match_threshold = 0.5
+    agent = Agent(cfg)
+    no = torch.zeros(1, dtype=torch.bool)
+    agent.remember(lifted(RED, 420), torch.tensor([365.0]), no, no)
+    acts, present = agent.activities(lifted(RED, 40))
+    assert agent.hub.match(acts, agent.cue_present(present))[0].item() == pytest.approx(0.75, abs=0.01)
+    agent.remember(lifted(RED, 40), torch.tensor([40.0]), no, no)
+    assert agent.hub.n_assemblies.item() == 2
+    agent.remember(lifted(RED, 420), torch.tensor([365.0]), no, no)
+    assert agent.hub.n_assemblies.item() == 2 and agent.memory.count.item() == 3
+
+
+def test_a_property_in_its_dead_zone_leaves_out_a_contradiction_but_not_a_held_outcome():
+    """A blue 470 g cylinder against the stored red 420 g one: weight's gap log(470 / 420) = 0.112 lies in its dead
+    zone (0.049 + 1 g / 420 g = 0.051 .. 0.223 + 3 g / 420 g = 0.230), colour clearly changed. Where the outcome
+    held, colour changed and did nothing: Elimination. Where the outcome moved, the weight in its dead zone may have
+    moved it: the comparison is left out, no rule fires."""
+    held = Agent(AgentConfig(seed=0))
+    drop(held, lifted(RED, 420), 365.0, True)
+    e = drop(held, lifted(BLUE, 470), 365.0, True)
+    assert letters(e) == "ESSS" and held.rules.by_context(0)["mixed"]["irrelevant"] == ["color"]
+    moved = Agent(AgentConfig(seed=0))
+    drop(moved, lifted(RED, 420), 365.0, True)
+    e = drop(moved, lifted(BLUE, 470), 200.0, True)
+    assert e.recalled.item() and letters(e) == "SSSS"
+    assert not moved.rules.held.any() and not moved.rules.contradicted.any()
