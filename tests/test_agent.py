@@ -277,3 +277,23 @@ def test_a_property_in_its_dead_zone_leaves_out_a_contradiction_but_not_a_held_o
     e = drop(moved, lifted(BLUE, 470), 200.0, True)
     assert e.recalled.item() and letters(e) == "SSSS"
     assert not moved.rules.held.any() and not moved.rules.contradicted.any()
+
+
+def test_the_recall_bound_changes_nothing_while_the_memory_holds_no_more_episodes():
+    """max_recalls = 8 is a bound for speed: with at most 8 episodes stored (the default experiment's 8 objects) the
+    network brings back the same episodes, and the agent learns and predicts the same, as with no bound at all."""
+    results = []
+    for bound in (8, 64):
+        cfg = AgentConfig(seed=0)
+        cfg.memory.max_recalls = bound
+        agent = Agent(cfg)
+        for rgb, d, h, mass in HAND_SET:
+            m, v, sinks = cylinder(rgb, d, h, mass)
+            agent.step(m, torch.tensor([v]), torch.zeros(1, dtype=torch.bool), torch.zeros(1, dtype=torch.bool),
+                       sank=torch.tensor([sinks]))
+        m, _, _ = cylinder((0.1, 0.7, 0.2), 4.2, 6.72, 30.0)
+        a = agent.anticipate(m)
+        results.append((agent.rules.state.clone(), a.expected.clone(), a.recall.valid.sum().item()))
+    assert agent.memory.count.item() <= 8 and results[1][2] <= 8
+    assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
+    assert results[0][2] == results[1][2]
