@@ -438,6 +438,13 @@ class EpisodicMemory(nn.Module):
             cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
         cue = cue.view(B, len(rows), C)
         s[:, rows] = cue
+        runs, at = [], 0   # the cue rows as runs of consecutive rows: (first cue row of the run, (lo, hi))
+        for r in rows:
+            if runs and runs[-1][1][1] == r:
+                runs[-1] = (runs[-1][0], (runs[-1][1][0], r + 1))
+            else:
+                runs.append((at, (r, r + 1)))
+            at += 1
         # a prediction is NaN only where sigma is (p outside [0, 1], after depressing a state that was no stored
         # episode); otherwise k_winners need not look for NaN
         finite = not c.zscore or not bool(torch.isnan(net.gain).any())
@@ -457,7 +464,8 @@ class EpisodicMemory(nn.Module):
                         fired[todo] = self._winners(sub.take(todo), cur[todo], finite)
                 new = fired.to(cur.dtype)
                 if clamp:
-                    new[:, rows] = q
+                    for at, (lo, hi) in runs:   # new[:, rows] = q, a slice per run of consecutive rows
+                        new[:, lo:hi] = q[:, at:at + hi - lo]
                 moving = (new != cur if prev is None else fired != prev).flatten(1).any(1)
                 if clamp and not bool(moving.all()):
                     done = ~moving
@@ -467,8 +475,9 @@ class EpisodicMemory(nn.Module):
                     cur, prev = new, None if clamp else fired
                     continue
                 s[idx] = new
-                idx, sub, cur, q = idx[moving], sub.take(moving), new[moving], q[moving]
-                prev = None if clamp else fired[moving]
+                keep = moving.nonzero().flatten()
+                idx, sub, cur, q = idx[keep], sub.take(keep), new.index_select(0, keep), q.index_select(0, keep)
+                prev = None if clamp else fired.index_select(0, keep)
                 if idx.numel() == 0:
                     break
             else:
