@@ -211,7 +211,8 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
     the predictions themselves, NaN where nothing was recalled), "most_common_knowledge", "agree_fraction",
-    "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level", "timing_s"}.
+    "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level" (trie nodes), "steps_per_level"
+    (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}.
     """
     n, N = len(train_names), len(orders)
     if n == 0 or N == 0:
