@@ -44,10 +44,11 @@ from aesop_torch.memory import EpisodicMemory, Recall
 from train.experiment import stack_measurements
 from train.summary import KNOWLEDGE_LETTERS
 
-# Sibling trie nodes stepped together. All 40,320 orders of the default set, 2 threads, shared recall cache:
-# 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB at 2048, 31.5 s / 2.1 GB at 4096 (each
-# level of the depth-first walk holds one piece alive, ~110 kB per agent, mostly the hub's W): 1024 is as fast as
-# any and lean.
+# Sibling trie nodes stepped together. All 40,320 orders of the default set with the plain trie (before states were
+# merged), 2 threads, shared recall cache: 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB
+# at 2048, 31.5 s / 2.1 GB at 4096 (each level of the depth-first walk holds one piece alive, ~110 kB per agent,
+# mostly the hub's W then): 1024 is as fast as any and lean. A piece is also where states merge first, but equal
+# states merge across pieces too (each object is perceived once: a state's bits do not depend on its piece).
 DEFAULT_CHUNK = 1024
 # torch threads of a population run. 2,000 orders of the default set (closed-form outcomes, as benches/population.py)
 # on the shared 2-core machine while other jobs ran: 19.7 s on 1 thread, 79.0 s on 2. Threads that wait for each
