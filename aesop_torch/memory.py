@@ -196,8 +196,10 @@ class _Net(NamedTuple):
     lists: tuple | None = None
 
     def take(self, i: torch.Tensor) -> "_Net":
-        return _Net(self.idx if self.idx.shape[0] == 1 else self.idx[i],
-                    *(t if t is None else t[i] for t in self[1:8]), self.lists)
+        if i.dtype == torch.bool:
+            i = i.nonzero().flatten()
+        return _Net(self.idx if self.idx.shape[0] == 1 else self.idx.index_select(0, i),
+                    *(t if t is None else t.index_select(0, i) for t in self[1:8]), self.lists)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
@@ -230,25 +232,26 @@ class _Net(NamedTuple):
         S, n = self.total, self.n
         p = self.p if self.p is not None else S / n.clamp(min=1)
         B, N = d.shape
-        pad = torch.nn.functional.pad
-        de = pad(d, (0, 1)) if self.lists is None or self.z.shape[1] else None   # neuron N: the padding, always 0
         if self.lists is not None:   # one memory for all cues, cues last: each bag sums whole rows, in order
             cols, starts, owners, firsts = self.lists
             u = torch.nn.functional.embedding_bag(cols, d.T.contiguous(), starts, mode="sum")    # (M, B) = X d
-            h = torch.nn.functional.embedding_bag(owners, u, firsts, mode="sum").T               # (B, N)
-            h = pad(h, (0, 1)) if self.z.shape[1] else h
+            h = torch.nn.functional.embedding_bag(owners, u, firsts, mode="sum").T.contiguous()  # (B, N)
         else:   # each cue its own memory, the additions in the same order: pattern by pattern, then neuron by neuron
             M, L = self.idx.shape[1:]
             of = _owners(M, L, d.device)
             flat = self.idx.flatten(1)
+            de = torch.nn.functional.pad(d, (0, 1))                  # neuron N: the padding, always 0
             u = de.new_zeros(B, M).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, M) = X d
-            h = torch.zeros_like(de).scatter_add_(1, flat, u.index_select(1, of))
+            h = torch.zeros_like(de).scatter_add_(1, flat, u.index_select(1, of))[:, :N]
         if self.z.shape[1]:
+            # the padding entries (neuron N) gather and scatter zeros at neuron N - 1: a running sum from 0 is never
+            # -0, so adding a zero of either sign leaves it as it was
             r, L = self.z.shape[1:]
             flat, of = self.z.flatten(1), _owners(r, L, d.device)
-            w = de.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, r) = Z d
-            h.scatter_add_(1, flat, w.neg_().index_select(1, of))
-        h = h[:, :N]
+            real = (flat < N).to(d.dtype)
+            flat = flat.clamp(max=N - 1)
+            w = d.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), d.gather(1, flat) * real)   # (B, r) = Z d
+            h.scatter_add_(1, flat, w.neg_().index_select(1, of) * real)
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
         return h - S * ((p * d).sum(1, keepdim=True) + (1 - p if self.q is None else self.q) * d)
 
@@ -424,7 +427,9 @@ class EpisodicMemory(nn.Module):
         """Clamped pattern completion, then free running; returns (state (B, rows, cols) bool, fixed point (B,)).
 
         Each cue stops iterating at its own fixed point (the dynamics are deterministic, so it would stay there):
-        only the cues still moving are carried on."""
+        only the cues still moving are carried on. A cue whose clamped phase ends at a fixed point starts the free
+        phase from that state, whose prediction the clamped phase's last step has just made: its winners are taken
+        as the free phase's first step (13 % fewer steps for 8 recalls from 230 of the agent's episodes)."""
         c = self.config
         B, R, C = cue.shape[0], c.rows, c.cols
         s = net.p.view(B, R, C).clone()    # unknown rows sit at the mean: no evidence either way
@@ -434,22 +439,46 @@ class EpisodicMemory(nn.Module):
             cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
         cue = cue.view(B, len(rows), C)
         s[:, rows] = cue
+        runs, at = [], 0   # the cue rows as runs of consecutive rows: (first cue row of the run, (lo, hi))
+        for r in rows:
+            if runs and runs[-1][1][1] == r:
+                runs[-1] = (runs[-1][0], (runs[-1][1][0], r + 1))
+            else:
+                runs.append((at, (r, r + 1)))
+            at += 1
         # a prediction is NaN only where sigma is (p outside [0, 1], after depressing a state that was no stored
         # episode); otherwise k_winners need not look for NaN
         finite = not c.zscore or not bool(torch.isnan(net.gain).any())
+        # the winners of the clamped phase's last step (before the cue rows are clamped again) for the cues that
+        # end it at a fixed point: the free phase's first step
+        ahead = torch.zeros(B, R, C, dtype=torch.bool, device=cue.device)
+        known = torch.zeros(B, dtype=torch.bool, device=cue.device)
         for clamp, steps in ((True, c.cue_steps), (False, c.free_steps)):
             idx, sub, cur, q = torch.arange(B, device=cue.device), net, s, cue   # the cues still moving
-            for _ in range(steps):
-                new = k_winners(sub.predict((cur - sub.p.view_as(cur)).flatten(1), c.zscore).view_as(cur),
-                                self.row_k, c.threshold, finite).to(cur.dtype)
+            prev = None   # cur as winners (bool), once it is binary: the free phase after its first step
+            for step in range(steps):
+                if clamp or step or not bool(known.any()):
+                    fired = self._winners(sub, cur, finite)
+                else:
+                    fired, todo = ahead, ~known
+                    if bool(todo.any()):
+                        fired[todo] = self._winners(sub.take(todo), cur[todo], finite)
+                new = fired.to(cur.dtype)
                 if clamp:
-                    new[:, rows] = q
-                moving = (new != cur).flatten(1).any(1)
+                    for at, (lo, hi) in runs:   # new[:, rows] = q, a slice per run of consecutive rows
+                        new[:, lo:hi] = q[:, at:at + hi - lo]
+                moving = (new != cur if prev is None else fired != prev).flatten(1).any(1)
+                if clamp and not bool(moving.all()):
+                    done = ~moving
+                    ahead[idx[done]] = fired[done]
+                    known[idx[done]] = True
                 if moving.all():
-                    cur = new
+                    cur, prev = new, None if clamp else fired
                     continue
                 s[idx] = new
-                idx, sub, cur, q = idx[moving], sub.take(moving), new[moving], q[moving]
+                keep = moving.nonzero().flatten()
+                idx, sub, cur, q = idx[keep], sub.take(keep), new.index_select(0, keep), q.index_select(0, keep)
+                prev = None if clamp else fired.index_select(0, keep)
                 if idx.numel() == 0:
                     break
             else:
@@ -457,3 +486,10 @@ class EpisodicMemory(nn.Module):
         fixed = torch.ones(B, dtype=torch.bool, device=cue.device)
         fixed[idx] = False                  # still moving when the free phase ran out of steps
         return s.bool(), fixed
+
+    def _winners(self, net: _Net, state: torch.Tensor, finite: bool) -> torch.Tensor:
+        """One step of the dynamics: the row-wise k-winners (bool) of what the network predicts for states
+        (B, R, C)."""
+        c = self.config
+        a = net.predict((state - net.p.view_as(state)).flatten(1), c.zscore).view_as(state)
+        return k_winners(a, self.row_k, c.threshold, finite)

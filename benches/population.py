@@ -1,17 +1,24 @@
-"""Throughput of train.population (every order at once) and the wall time of `train/run.py --orders all`.
+"""Throughput of train.population (every order at once) beside the plain trie, and the wall time of
+`train/run.py --orders all` for 8 and 9 objects.
 
-    python benches/population.py [--skip-run]
+    python benches/population.py [--skip-run] [--repeats R]
 
-Part 1 runs populations of 1, 100 and 10,000 random orders and all 40,320 orders of the default 8 objects through
-`run_population`, with closed-form outcomes (Archimedes, measurements from the object specs: no physics), and prints
-order-episodes per second (orders x 8 episodes / wall, final probe predictions included), the agent-steps the trie
-actually ran, and where the time went. Part 2 runs `python train/run.py --orders all --out <tmpdir>` end to end
-(physics of 8 drops and 5 probe inspections, 64 orders in detail, the population, summary and figure) in a
-subprocess and prints its wall time and peak memory. Last line: `all_orders_wall_s=X` (0 with --skip-run).
+Part 1 runs populations of 1, 100, 10,000 random orders and all 40,320 orders of the default 8 objects through
+`run_population`, with closed-form outcomes (Archimedes, measurements from the object specs: no physics): ours
+(prefix sharing, merged states) and its peer, the plain trie (`merge=False`: every trie node stepped, as the
+population did before states were merged), alternately, R times each (default 3), medians. It prints order-episodes
+per second (orders x 8 episodes / wall, final probe predictions included), the agent-steps each ran, the ratio, and
+whether both gave the same knowledge and rounded probe errors for every order. Part 2 runs
+`python train/run.py --orders all --out <tmpdir>` end to end (physics of the drops and probe inspections, 64 orders
+in detail, the population, summary and figure, goal trials) in a subprocess for the default file and for the
+default file with a ninth train object (a blue heavy sphere: 9! = 362,880 orders), and prints the wall times and peak
+memory. Last line: `all_orders_wall_s=X nine_objects_wall_s=Y` (0 with --skip-run).
 Printed, never asserted: speed depends on the machine and on what else runs on it.
 """
 
+import json
 import resource
+import statistics
 import subprocess
 import sys
 import tempfile
@@ -25,10 +32,10 @@ from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders  # noqa: E402
 from train.population import run_population  # noqa: E402
-from train.progress import Step  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 POPULATIONS = ("1", "100", "10000", "all")
+NINTH = {"name": "blue_heavy_sphere", "shape": "sphere", "color": "blue", "dims_cm": [5.5], "mass_g": 350}
 
 
 def closed_form_world():
@@ -37,39 +44,60 @@ def closed_form_world():
     return [s.name for s in objs.train], [p.name for p in objs.probe], outcomes, probes
 
 
-def main():
+def population_section(repeats: int) -> None:
     train, probe_names, outcomes, probes = closed_form_world()
     n = len(train)
-    print(f"{'orders':>7} {'wall s':>7} {'order-episodes/s':>17} {'agent-steps':>12} {'steps s':>8} {'probes s':>9} "
-          f"{'agree':>7}  most common")
+    print(f"populations of the default set, ours (merged states) and the plain trie alternately, medians of {repeats}")
+    print(f"{'orders':>7} {'wall s':>7} {'order-ep/s':>11} {'steps':>7} {'plain wall s':>13} {'order-ep/s':>11} "
+          f"{'steps':>7} {'speed-up':>9}  same results")
     for which in POPULATIONS:
         orders = draw_orders(n, which, seed=0)
-        t0 = time.perf_counter()
-        with Step(f"{len(orders)} order(s)", len(orders), unit="order", stream=sys.stderr, announce=False) as bar:
-            pop = run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), progress=bar.to)
-        wall = time.perf_counter() - t0
-        t = pop["timing_s"]
-        print(f"{len(orders):>7} {wall:>7.2f} {len(orders) * n / wall:>17.0f} {pop['agent_steps']:>12} "
-              f"{t['steps']:>8.2f} {t['probes']:>9.2f} {pop['agree_fraction']:>7.4f}  {pop['most_common_knowledge']}")
+        walls, runs = {True: [], False: []}, {}
+        for _ in range(repeats):
+            for merge in (True, False):
+                t0 = time.perf_counter()
+                runs[merge] = run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), merge=merge)
+                walls[merge].append(time.perf_counter() - t0)
+        ours, plain = statistics.median(walls[True]), statistics.median(walls[False])
+        same = all(runs[True][k] == runs[False][k] for k in ("final_knowledge", "final_probe_rel_error"))
+        print(f"{len(orders):>7} {ours:>7.2f} {len(orders) * n / ours:>11.0f} {runs[True]['agent_steps']:>7} "
+              f"{plain:>13.2f} {len(orders) * n / plain:>11.0f} {runs[False]['agent_steps']:>7} {plain / ours:>8.1f}x  "
+              f"{'yes' if same else 'NO'}", flush=True)
     print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.2f} GB")
 
-    if "--skip-run" in sys.argv[1:]:
-        print("all_orders_wall_s=0")
-        return
-    with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, str(ROOT / "train" / "run.py"), "--orders", "all", "--out", str(Path(tmp) / "run")]
-        t0 = time.perf_counter()
-        done = subprocess.run(cmd, capture_output=True, text=True, check=False)
-        wall = time.perf_counter() - t0
+
+def timed_run(args: list, tmp: str) -> float:
+    cmd = [sys.executable, str(ROOT / "train" / "run.py"), "--orders", "all", *args, "--out", str(Path(tmp) / "run")]
+    t0 = time.perf_counter()
+    done = subprocess.run(cmd, capture_output=True, text=True, check=False)
+    wall = time.perf_counter() - t0
     if done.returncode != 0:
         print(done.stdout[-2000:], done.stderr[-2000:], sep="\n")
-        raise SystemExit(f"train/run.py --orders all failed with exit code {done.returncode}")
+        raise SystemExit(f"{' '.join(cmd)} failed with exit code {done.returncode}")
     for line in done.stdout.splitlines():
-        if line.startswith(("simulating", "population:", "order_independent")):
+        if line.startswith(("train/run.py: starting", "simulating", "population:", "order_independent")):
             print(f"  run.py: {line}")
-    print(f"train/run.py --orders all: {wall:.1f} s wall, peak memory "
-          f"{resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6:.2f} GB")
-    print(f"all_orders_wall_s={wall:.1f}")
+    print(f"train/run.py --orders all {' '.join(args)}: {wall:.1f} s wall, peak memory of the runs so far "
+          f"{resource.getrusage(resource.RUSAGE_CHILDREN).ru_maxrss / 1e6:.2f} GB", flush=True)
+    return wall
+
+
+def main():
+    argv = sys.argv[1:]
+    repeats = int(argv[argv.index("--repeats") + 1]) if "--repeats" in argv else 3
+    population_section(repeats)
+    if "--skip-run" in argv:
+        print("all_orders_wall_s=0 nine_objects_wall_s=0")
+        return
+    with tempfile.TemporaryDirectory() as tmp:
+        eight = timed_run([], tmp)
+    with tempfile.TemporaryDirectory() as tmp:
+        spec = json.loads(Path(DEFAULT_OBJECTS_FILE).read_text())
+        spec["train"].append(NINTH)
+        nine_file = Path(tmp) / "nine_objects.json"
+        nine_file.write_text(json.dumps(spec))
+        nine = timed_run(["--objects", str(nine_file)], tmp)
+    print(f"all_orders_wall_s={eight:.1f} nine_objects_wall_s={nine:.1f}")
 
 
 if __name__ == "__main__":

@@ -180,6 +180,27 @@ def test_factorised_network_equals_dense_network():
             assert out.strength[b, k].item() == pytest.approx(strength, abs=1e-6)
 
 
+def test_the_free_phase_starts_from_the_clamped_phase_last_prediction(monkeypatch):
+    """Cue A's exact object row (binary, as stored): the first clamped step completes A, the second finds A fixed, and
+    the free phase starts from that same state, so its first step is the second's prediction, not computed again:
+    it finds A fixed too (its cue row is A's binary one). 2 predictions for the recall, not 3; the same recall as
+    the dense network's, which computes every step."""
+    mem = memory(A, B, Cc)
+    calls = []
+    winners = EpisodicMemory._winners
+
+    def counted(self, net, state, finite):
+        calls.append(state.shape[0])
+        return winners(self, net, state, finite)
+
+    monkeypatch.setattr(EpisodicMemory, "_winners", counted)
+    out = mem.recall(cue((A, 1.0)), max_recalls=1)
+    assert calls == [1, 1]
+    assert out.valid[0, 0] and torch.equal(out.episodes[0, 0], A)
+    want = dense_recall([A, B, Cc], A[OBJ].double(), mem.config, 1)
+    assert len(want) == 1 and torch.equal(want[0][0], A)
+
+
 def test_agents_are_independent_and_many_cues_share_one_memory():
     both = EpisodicMemory(batch=2)
     both.store(torch.stack([A, B]))

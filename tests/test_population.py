@@ -10,11 +10,12 @@ from collections import Counter
 import pytest
 import torch
 
-from aesop_torch.agent import Agent, AgentConfig
+from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, MemoryConfig
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects
 from train.experiment import Experiment, closed_form_outcomes, draw_orders, median_rel_error
-from train.population import RecallCache, SharedRecallMemory, _row_keys, agreement, median_rel_errors, run_population
+from train.population import (RecallCache, SharedRecallMemory, _owned, _row_keys, agreement, canonicalise,
+                              median_rel_errors, run_population)
 from train.summary import knowledge_key
 
 # five of the default objects whose 120 orders agree on their knowledge but end with different sets of probe
@@ -71,7 +72,8 @@ def test_all_orders_of_five_match_experiment(mixed):
     distinct = {tuple(row) for row in pop["final_probe_cm3"].nan_to_num(-1.0).tolist()}
     assert len(distinct) > 1                              # the comparison covers orders that end differently
     assert pop["nodes_per_level"] == [5, 20, 60, 120, 120]
-    assert pop["agent_steps"] == 5 + 20 + 60 + 120 + 120   # one step per trie node, not 5 x 120
+    # at most one step per trie node (not 5 x 120), fewer where prefixes leave their agents in the same state
+    assert pop["agent_steps"] == sum(pop["steps_per_level"]) < 5 + 20 + 60 + 120 + 120
 
 
 def test_subset_with_a_repeated_order_matches_experiment(world):
@@ -93,6 +95,93 @@ def test_same_inputs_same_outputs_bit_for_bit(world, mixed):
     assert again["final_knowledge"] == pop["final_knowledge"]
     assert again["final_probe_rel_error"] == pop["final_probe_rel_error"]
     assert torch.equal(again["final_probe_cm3"].nan_to_num(-1.0), pop["final_probe_cm3"].nan_to_num(-1.0))
+
+
+# the red and blue heavy cylinders, the light and the small red cylinders: R0 and B1 differ in colour alone, so the
+# later of them is not encoded (nothing new: the outcome held), and what it compares itself with (so the evidence it
+# adds) depends on which objects were stored before it. Every other object is encoded, and a comparison of two of
+# them adds the same evidence whichever came first.
+FOUR = ("red_heavy_cylinder", "blue_heavy_cylinder", "red_light_cylinder", "red_small_heavy_cylinder")
+
+
+def four_states(prefix) -> tuple:
+    """The state after a prefix of FOUR, by the rule above: the objects seen, which of R0 / B1 came first, and the
+    objects seen before the later of them came."""
+    heavy = [i for i, o in enumerate(prefix) if o in (0, 1)]
+    return (frozenset(prefix), prefix[heavy[0]] if heavy else None,
+            frozenset(prefix[:heavy[1]]) if len(heavy) == 2 else None)
+
+
+def test_merged_states_of_four_objects_counted_by_hand(world):
+    """All 24 orders of FOUR: a level's distinct states (four_states over its prefixes) are stepped once each; the
+    next level steps each of them with each object it has not seen. By hand: 4 states after one object, 7 after two
+    ({R0, B1} twice: R0 or B1 first), 10 after three ({R0, B1, x} four times: first heavy R0 or B1, x before the
+    later one or not), 8 after four. Results: Experiment's, and the plain trie's (merge=False, every node stepped)."""
+    _, probe_names, outcomes, probes = world
+    names, n = list(FOUR), len(FOUR)
+    orders = [list(p) for p in itertools.permutations(range(n))]
+    states = [{four_states(o[:t + 1]) for o in orders} for t in range(n)]
+    assert [len(s) for s in states] == [4, 7, 10, 8]
+    exp = experiment(names, probe_names, orders, outcomes, probes)
+    pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=5, threads=1)
+    assert pop["steps_per_level"] == [4] + [len(states[t - 1]) * (n - t) for t in range(1, n)] == [4, 12, 14, 10]
+    assert pop["distinct_final_states"] == 8
+    assert_same_as_experiment(pop, exp)
+    plain = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=5, threads=1, merge=False)
+    assert plain["steps_per_level"] == plain["nodes_per_level"] == [4, 12, 24, 24]
+    assert plain["final_knowledge"] == pop["final_knowledge"]
+    assert plain["final_probe_rel_error"] == pop["final_probe_rel_error"]
+    assert torch.allclose(plain["final_probe_cm3"].nan_to_num(-1.0), pop["final_probe_cm3"].nan_to_num(-1.0),
+                          rtol=1e-5, atol=0)
+
+
+def test_a_merge_needs_the_same_orders_below(world):
+    """R0 R2 and R2 R0 end in the same state; their orders' results are shared only where the same objects follow in
+    the same order below them."""
+    _, probe_names, outcomes, probes = world
+    names = list(FOUR)
+    for orders, steps in (([[0, 2, 3, 1], [2, 0, 1, 3]], [2, 2, 2, 2]),     # different suffixes: both stepped
+                          ([[0, 2, 3, 1], [2, 0, 3, 1]], [2, 2, 1, 1])):    # the same suffix: stepped once
+        exp = experiment(names, probe_names, orders, outcomes, probes)
+        pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, threads=1)
+        assert pop["steps_per_level"] == steps
+        assert_same_as_experiment(pop, exp)
+
+
+def test_canonicalise_relabels_by_object(world):
+    """R0 then R2 and R2 then R0 (both encoded, each in the other slot and on the other hub neurons) hold the same
+    bytes after canonicalise: R0's episode and assembly first, on hub neurons 0-1 of each row."""
+    _, _, outcomes, _ = world
+    cfg = AgentConfig()
+    cfg.memory.max_episodes = cfg.hub.max_assemblies = 4
+    agent = Agent(cfg, batch=2)
+    first, second = torch.tensor([0, 2]), torch.tensor([2, 0])
+    rec = [outcomes[name] for name in FOUR]
+    owners = (torch.full((2, 4), 4), torch.full((2, 4), 4))
+    for obj in (first, second):
+        meas = {k: torch.tensor([rec[i]["measurement"][k] for i in obj.tolist()]) for k in
+                ("rgb", "extent_cm", "fill", "mass_g")}
+        nh, nm = agent.hub.n_assemblies.clone(), agent.memory.count.clone()
+        res = agent.step(meas, torch.tensor([rec[i]["observed_cm3"] for i in obj.tolist()]),
+                         torch.tensor([rec[i]["goal_before"] for i in obj.tolist()]),
+                         torch.tensor([rec[i]["goal_after"] for i in obj.tolist()]),
+                         sank=torch.tensor([rec[i]["sank"] for i in obj.tolist()]))
+        assert res.encoded.all()
+        owners = (_owned(owners[0], nh, agent.hub.n_assemblies, obj), _owned(owners[1], nm, agent.memory.count, obj))
+    assert owners[0].tolist() == owners[1].tolist() == [[0, 2, 4, 4], [2, 0, 4, 4]]
+    assert not torch.equal(agent.memory.patterns[0], agent.memory.patterns[1])
+    learned = lambda: {f"{p}.{k}": v.clone() for p in ("hub", "memory", "rules")   # noqa: E731
+                       for k, v in getattr(agent, p).state_dict().items()}
+    before = learned()
+    hub_owner, mem_owner = canonicalise(agent, *owners)
+    assert hub_owner.tolist() == mem_owner.tolist() == [[0, 2, 4, 4]] * 2
+    for key, value in learned().items():
+        assert torch.equal(value[0], value[1]), key
+        assert torch.equal(value[0], before[key][0]), key      # agent 0 already stored them in object order
+    # R0's episode is the first and its object rows hold hub neurons 0-1 of each row (its assembly)
+    obj_rows = agent.memory.patterns[1, 0, list(OBJECT_ROWS)]
+    assert obj_rows[:, :2].all() and obj_rows.sum() == 2 * len(OBJECT_ROWS)
+    assert torch.equal(agent.hub.branches[1, 0], before["hub.branches"][1, 1])
 
 
 def test_agreement_on_a_hand_made_case():

@@ -4,39 +4,51 @@
 is too slow and too big. Here only the end of each order is kept, and work that orders share is done once:
 
 - Prefix sharing. With the jar reset between episodes an agent's state after t episodes depends only on the first t
-  objects of its order, so the orders form a trie (level t: the distinct prefixes of length t + 1) and each trie node
-  is one agent-step. A node's children start as copies of it (`Agent.select`), then each steps with its own next
-  object. All orders of 8 objects: 109,600 agent-steps instead of 322,560.
+  objects of its order, so the orders form a trie (level t: the distinct prefixes of length t + 1). A node's
+  children start as copies of it (`Agent.select`), then each steps with its own next object. All orders of 8
+  objects: 109,600 trie nodes instead of 322,560 agent-steps.
+- Merged states. Two prefixes that used the same objects and left their agents in the same state have the same
+  future: the same remaining objects, stepped from the same state. Orders that differ in when an object that
+  changed nothing came, or in the order of objects whose comparisons are symmetric, end up so. The agent's state
+  records the order in only one more way: which slots (memory episodes, hub assemblies and the hub neurons they
+  use) the objects were stored in, a labelling the network does not depend on; `canonicalise` relabels it by the
+  objects. Each node's state is digested after its step; a node whose state was met before at its level (with the
+  same orders below it) is not stepped further and its orders take the first one's results. All orders of 8
+  objects: 2,782 agent-steps instead of 109,600, with the plain trie's knowledge and rounded probe errors
+  (its predictions within 3e-6 relative; benches/population.py runs both).
 - Shared recall (`SharedRecallMemory`, `RecallCache`). Orders that differ only in when an object that changed
   nothing came end up with the same memory and cue it alike; each distinct (memory, cue) pair is recalled once per
-  run (all orders of 8 objects: 45,063 recalls instead of 311,200), the rest copied from the first.
+  run, the rest copied from the first.
 - Bounded memory. The trie is walked depth first in pieces of at most `chunk` sibling nodes, so at most chunk agents
-  per level are alive, whatever the number of orders.
+  per level are alive, whatever the number of orders; the merging keeps a 16-byte digest per distinct state.
 
 Results agree with `Experiment` on the same orders (tests/test_population.py): the same final knowledge, and the same
 probe predictions up to float rounding. Not bit for bit: the agent's float results depend in their last bits on the
 batch an agent is computed in (permuting Experiment's own agents changes a few probe predictions by ~1e-6
-relative), and the batches here differ from Experiment's. Same inputs, same outputs, bit for bit.
+relative), and the batches (and the relabelling) here differ from Experiment's. Same inputs, same outputs, bit for
+bit.
 """
 
 from __future__ import annotations
 
 import copy
+import hashlib
 import time
 from collections import Counter
 
 import numpy as np
 import torch
 
-from aesop_torch.agent import Agent, AgentConfig
+from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, Recall
 from train.experiment import stack_measurements
 from train.summary import KNOWLEDGE_LETTERS
 
-# Sibling trie nodes stepped together. All 40,320 orders of the default set, 2 threads, shared recall cache:
-# 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB at 2048, 31.5 s / 2.1 GB at 4096 (each
-# level of the depth-first walk holds one piece alive, ~110 kB per agent, mostly the hub's W): 1024 is as fast as
-# any and lean.
+# Sibling trie nodes stepped together. All 40,320 orders of the default set with the plain trie (before states were
+# merged), 2 threads, shared recall cache: 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB
+# at 2048, 31.5 s / 2.1 GB at 4096 (each level of the depth-first walk holds one piece alive, ~110 kB per agent,
+# mostly the hub's W then): 1024 is as fast as any and lean. A piece is also where states merge first, but equal
+# states merge across pieces too (each object is perceived once: a state's bits do not depend on its piece).
 DEFAULT_CHUNK = 1024
 # torch threads of a population run. 2,000 orders of the default set (closed-form outcomes, as benches/population.py)
 # on the shared 2-core machine while other jobs ran: 19.7 s on 1 thread, 79.0 s on 2. Threads that wait for each
@@ -161,7 +173,8 @@ class SharedRecallMemory(EpisodicMemory):
 
 
 class _Trie:
-    """The orders sorted lexicographically; node[t][i] is the level-t node (prefix of length t + 1) of sorted row i."""
+    """The orders sorted lexicographically; node[t][i] is the level-t node (prefix of length t + 1) of sorted row i,
+    and level-t node k spans the sorted rows lo[t][k]..hi[t][k]."""
 
     def __init__(self, orders: torch.Tensor):
         N, n = orders.shape
@@ -170,7 +183,7 @@ class _Trie:
             perm = perm[torch.sort(orders[perm, c], stable=True).indices]
         self.perm, self.rows = perm, orders[perm]
         differs = torch.zeros(N, dtype=torch.bool)
-        self.start, self.node = [], []
+        self.start, self.node, self.lo, self.hi = [], [], [], []
         for t in range(n):
             differs = differs.clone()
             differs[1:] |= self.rows[1:, t] != self.rows[:-1, t]
@@ -178,24 +191,29 @@ class _Trie:
             start[0] = True
             self.start.append(start)               # row i begins a new level-t node
             self.node.append(start.cumsum(0) - 1)  # level-t node id of row i
+            lo = start.nonzero().flatten()
+            self.lo.append(lo)
+            self.hi.append(torch.cat([lo[1:], torch.tensor([N])]))
         self.nodes_per_level = [int(s.sum()) for s in self.start]
 
 
 def run_population(train_names: list[str], probe_names: list[str], orders: list[list[int]], outcomes: dict,
                    probes: dict, config: AgentConfig, chunk: int = DEFAULT_CHUNK, progress=None,
-                   threads: int | None = None) -> dict:
+                   threads: int | None = None, merge: bool = True) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.experiment.draw_orders
     gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
-    DEFAULT_THREADS), restored afterwards.
+    DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
+    and its peer in benches/population.py).
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
     the predictions themselves, NaN where nothing was recalled), "most_common_knowledge", "agree_fraction",
-    "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level", "timing_s"}.
+    "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level" (trie nodes), "steps_per_level"
+    (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}.
     """
     n, N = len(train_names), len(orders)
     if n == 0 or N == 0:
@@ -222,34 +240,98 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         root = Agent(config, batch=1)
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
-        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress)
-        walk.grow(root, 0, N, 0)
+        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge)
+        walk.perceive(root)
+        A, M = config.hub.max_assemblies, config.memory.max_episodes
+        walk.grow(root, (torch.full((1, A), n), torch.full((1, M), n)), None, 0)
+        keys, errors, predictions = walk.results()
     finally:
         torch.set_num_threads(old_threads)
     t_end = time.perf_counter()
 
-    common, fraction, counts = agreement(walk.keys)
+    common, fraction, counts = agreement(keys)
     return {
         "orders": N,
-        "final_knowledge": walk.keys,
-        "final_probe_rel_error": walk.errors,
-        "final_probe_cm3": walk.predictions,
+        "final_knowledge": keys,
+        "final_probe_rel_error": errors,
+        "final_probe_cm3": predictions,
         "most_common_knowledge": common,
         "agree_fraction": fraction,
         "knowledge_counts": counts,
         "agent_steps": walk.agent_steps,
         "distinct_recalls": walk.cache.size,
         "nodes_per_level": walk.trie.nodes_per_level,
+        "steps_per_level": walk.steps_per_level,
+        "distinct_final_states": len(walk.leaf_keys),
         "timing_s": {"setup": round(t_setup - t0, 3), "steps": round(walk.step_s, 3),
                      "probes": round(walk.probe_s, 3), "total": round(t_end - t0, 3)},
     }
 
 
-class _Walk:
-    """The depth-first walk over the trie, writing each order's results as its leaf is reached."""
+def _owned(owner: torch.Tensor, before: torch.Tensor, after: torch.Tensor, obj: torch.Tensor) -> torch.Tensor:
+    """owner (B, S) with the slots before[b]..after[b] - 1 (filled by this step) set to obj[b]."""
+    slot = torch.arange(owner.shape[1])
+    return torch.where((slot >= before[:, None]) & (slot < after[:, None]), obj[:, None], owner)
 
-    def __init__(self, train_names, probe_names, outcomes, probes, orders, chunk, progress):
-        self.trie, self.chunk, self.progress = _Trie(orders), chunk, progress
+
+def canonicalise(agent: Agent, hub_owner: torch.Tensor, mem_owner: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """Relabel each agent's stored objects in place into the order of the objects that stored them, so that agents
+    that learned the same things in another order hold the same bytes. Returns the owners in their new order.
+
+    hub_owner (B, A): the train object that allocated each hub slot; mem_owner (B, M): the object of each stored
+    episode (n, the object count, for an empty slot). The memory's episodes are sorted by their objects. The hub's
+    assemblies are sorted too where they lie as the hub lays them out while no two overlap (`ObjectHub._pick`: slot
+    s on neurons a s .. a s + a - 1 of every row, a = assembly_size): slot j then takes the stored patterns of the
+    object that is j-th in order, and its neurons stand for that object in the memory's episodes (the object rows
+    are the hub's neurons, `agent.OBJECT_ROWS`). Nothing else is touched (usage, assemblies, strengths and the rules
+    are the same for both labellings), so the relabelled agent is the same network with its neurons and slots
+    renamed: it computes the same things, up to the order of float additions and ties broken by index."""
+    hub, mem = agent.hub, agent.memory
+    B, M = mem.patterns.shape[:2]
+    big = torch.iinfo(torch.long).max
+    order = torch.sort(torch.where(torch.arange(M) < mem.count[:, None], mem_owner, big), dim=1, stable=True).indices
+    mem.patterns = mem.patterns[torch.arange(B)[:, None], order]
+    mem_owner = mem_owner.gather(1, order)
+    A, N = hub.assemblies.shape[1:]
+    cfg = agent.config.hub
+    a, cols = cfg.assembly_size, cfg.n_neurons
+    if A == 0 or A * a > cols or cols != mem.patterns.shape[3] or cfg.rows != len(OBJECT_ROWS):
+        return hub_owner, mem_owner
+    filled = torch.arange(A) < hub.n_assemblies[:, None]                                     # (B, A)
+    code = torch.zeros(A, cfg.rows, cols, dtype=torch.bool)
+    for s in range(A):
+        code[s, :, a * s:a * (s + 1)] = True
+    laid_out = (hub.assemblies == (code.flatten(1) & filled[..., None])).flatten(1).all(1)  # (B,)
+    perm = torch.sort(torch.where(filled, hub_owner, big), dim=1, stable=True).indices
+    perm = torch.where(laid_out[:, None], perm, torch.arange(A))
+    hub.branches = hub.branches[torch.arange(B)[:, None], perm]
+    hub.branch_norm = hub.branch_norm[torch.arange(B)[:, None], perm]
+    colmap = torch.arange(cols).repeat(B, 1)
+    colmap[:, :A * a] = (a * perm[:, :, None] + torch.arange(a)).flatten(1)                  # new column <- old
+    rows = list(OBJECT_ROWS)
+    obj = mem.patterns[:, :, rows]
+    mem.patterns[:, :, rows] = obj.gather(3, colmap[:, None, None, :].expand(obj.shape))
+    return hub_owner.gather(1, perm), mem_owner
+
+
+def _state_digests(agent: Agent, *extra: torch.Tensor) -> list[bytes]:
+    """A 16-byte digest (blake2b) of each agent's learned state (every persistent buffer of the hub, the memory and
+    the rules) and the extra (B, ...) parts: equal digests, equal bytes (a collision is a 2^-64 event at 2^32
+    states)."""
+    parts = [getattr(part, key) for part in (agent.hub, agent.memory, agent.rules) for key in part.state_dict()]
+    return [hashlib.blake2b(k, digest_size=16).digest() for k in _row_keys(*extra, *parts)]
+
+
+class _Walk:
+    """The depth-first walk over the trie, merging the subtrees of nodes whose agents are in the same state.
+
+    Two prefixes that used the same objects and left their agents in the same state (after `canonicalise`) have
+    the same future: the same remaining objects, stepped from the same state. A node whose state was met before at
+    its level, with the same suffixes below it, is not stepped further: its orders take the results of the first.
+    Each order ends at a leaf result (knowledge and probe predictions), computed once per distinct final state."""
+
+    def __init__(self, train_names, probe_names, outcomes, probes, orders, chunk, progress, merge=True):
+        self.trie, self.chunk, self.progress, self.merge = _Trie(orders), chunk, progress, merge
         self.n, self.N = orders.shape[1], orders.shape[0]
         recs = [outcomes[name] for name in train_names]
         self.meas = stack_measurements([r["measurement"] for r in recs])          # (n_objects, ...) per key
@@ -259,57 +341,138 @@ class _Walk:
         self.sank = torch.tensor([r["sank"] for r in recs]) if all("sank" in r for r in recs) else None
         self.probe_meas = [stack_measurements([probes[name]["measurement"]]) for name in probe_names]
         self.truth = torch.tensor([probes[name]["archimedes_cm3"] for name in probe_names])
-        self.keys: list = [None] * self.N
-        self.predictions = torch.full((self.N, len(probe_names)), float("nan"))
-        self.errors: list = [None] * self.N
+        self.memo: list[dict] = [{} for _ in range(self.n)]    # level t: state digest -> the level-t node stepped
+        self.leaf_of = torch.full((self.N,), -1, dtype=torch.long)   # sorted row -> its leaf result
+        self.leaf_keys: list[str] = []
+        self.leaf_errors: list = []
+        self.leaf_pred: list[torch.Tensor] = []
         self.agent_steps, self.done, self.step_s, self.probe_s = 0, 0, 0.0, 0.0
+        self.steps_per_level = [0] * self.n
         self.cache = RecallCache()
 
-    def grow(self, parents: Agent, lo: int, hi: int, t: int) -> None:
-        """Step the level-t children of `parents` (the level t-1 nodes of sorted rows lo..hi, one agent each; the
-        root for t = 0) in pieces of at most `chunk` nodes, then recurse into each piece."""
-        trie = self.trie
-        starts = trie.start[t][lo:hi].nonzero().flatten() + lo                   # first row of each child
-        bounds = torch.cat([starts, torch.tensor([hi])])
-        for g in range(0, len(starts), self.chunk):
-            first = starts[g:g + self.chunk]
-            plo, phi = int(bounds[g]), int(bounds[min(g + self.chunk, len(starts))])
-            parent = (trie.node[t - 1][first] - trie.node[t - 1][lo]) if t else torch.zeros_like(first)
-            # an only child continues its parent's agent in place (nothing else needs the parent): no copy
-            child = parents if len(starts) == parents.batch else parents.select(parent)
-            child.memory.cache = self.cache
-            obj = trie.rows[first, t]
-            tic = time.perf_counter()
-            child.step({k: v[obj] for k, v in self.meas.items()}, self.observed[obj], self.before[obj],
-                       self.after[obj], sank=None if self.sank is None else self.sank[obj])
-            self.step_s += time.perf_counter() - tic
-            self.agent_steps += len(first)
-            if t + 1 < self.n:
-                self.grow(child, plo, phi, t + 1)
-            else:
-                self._finish(child, plo, phi)
-            del child
+    def perceive(self, agent: Agent) -> None:
+        """What the agents perceive of each object and probe (Agent.activities), computed once here: in the last bits
+        it depends on the batch it is computed in, and the merging needs a state to come out the same bits
+        whichever batch stepped it."""
+        self.acts, self.present = agent.activities(self.meas)
+        self.probe_acts = [agent.activities(m) for m in self.probe_meas]
 
-    def _finish(self, leaves: Agent, lo: int, hi: int) -> None:
-        """Final knowledge and probe error of the leaves (full orders) of sorted rows lo..hi."""
-        tic = time.perf_counter()
-        pred = self._probe_predictions(leaves)
-        errors = median_rel_errors(pred, self.truth)
-        keys = knowledge_keys(leaves.rules.state)
-        self.probe_s += time.perf_counter() - tic
-        leaf = self.trie.node[self.n - 1][lo:hi] - self.trie.node[self.n - 1][lo]
-        self.predictions[self.trie.perm[lo:hi]] = pred[leaf]
-        leaf = leaf.tolist()
-        for row, i in zip(self.trie.perm[lo:hi].tolist(), leaf):
-            self.keys[row] = keys[i]
-            self.errors[row] = None if errors[i] is None else round(errors[i], 4)
-        self.done += hi - lo
+    def results(self) -> tuple[list, list, torch.Tensor]:
+        """Per order, in the order given: (knowledge keys, probe errors, (N, n_probes) probe predictions)."""
+        leaf = torch.empty_like(self.leaf_of)
+        leaf[self.trie.perm] = self.leaf_of
+        pred = torch.cat(self.leaf_pred) if self.leaf_pred else torch.zeros(0, len(self.truth))
+        ids = leaf.tolist()
+        return [self.leaf_keys[i] for i in ids], [self.leaf_errors[i] for i in ids], pred[leaf]
+
+    def grow(self, parents: Agent, owners: tuple, pnodes: torch.Tensor | None, t: int) -> None:
+        """Step the level-t children of `parents` (agent i: the level t-1 node pnodes[i]; the root for t = 0, pnodes
+        None) in pieces of at most `chunk` nodes, then recurse into the children whose state is new."""
+        trie = self.trie
+        if t == 0:
+            cids = torch.arange(trie.nodes_per_level[0])
+            pidx = torch.zeros_like(cids)
+        else:
+            first = trie.node[t][trie.lo[t - 1][pnodes]]
+            count = trie.node[t][trie.hi[t - 1][pnodes] - 1] - first + 1
+            pidx = torch.arange(len(pnodes)).repeat_interleave(count)
+            cids = first.repeat_interleave(count) + torch.arange(int(count.sum())) - \
+                (count.cumsum(0) - count).repeat_interleave(count)
+        for g in range(0, len(cids), self.chunk):
+            ids, par = cids[g:g + self.chunk], pidx[g:g + self.chunk]
+            # an only child continues its parent's agent in place (nothing else needs the parent): no copy
+            child = parents if len(cids) == parents.batch else parents.select(par)
+            hub_owner, mem_owner = owners[0][par], owners[1][par]
+            child.memory.cache = self.cache
+            rows = trie.lo[t][ids]
+            obj = trie.rows[rows, t]
+            n_hub, n_mem = child.hub.n_assemblies.clone(), child.memory.count.clone()
+            tic = time.perf_counter()
+            child.activities = lambda measurement: (self.acts[obj], self.present[obj])   # seen once, see perceive
+            try:
+                child.step({k: v[obj] for k, v in self.meas.items()}, self.observed[obj], self.before[obj],
+                           self.after[obj], sank=None if self.sank is None else self.sank[obj])
+            finally:
+                del child.activities
+            hub_owner = _owned(hub_owner, n_hub, child.hub.n_assemblies, obj)
+            mem_owner = _owned(mem_owner, n_mem, child.memory.count, obj)
+            if self.merge:
+                hub_owner, mem_owner = canonicalise(child, hub_owner, mem_owner)
+                used = torch.zeros(len(ids), self.n, dtype=torch.bool)
+                used[torch.arange(len(ids))[:, None], trie.rows[rows, :t + 1]] = True
+                digests = _state_digests(child, used, hub_owner, mem_owner)
+            else:   # every node its own state
+                digests = [(t, c) for c in ids.tolist()]
+            self.step_s += time.perf_counter() - tic
+            self.agent_steps += len(ids)
+            self.steps_per_level[t] += len(ids)
+            if t + 1 == self.n:
+                self._finish(child, ids, digests)
+                continue
+            memo, new, copies, seen = self.memo[t], [], [], {}
+            for i, (d, c) in enumerate(zip(digests, ids.tolist())):
+                m = memo.get(d, seen.get(d))
+                if m is not None and self._same_below(m, c, t):
+                    copies.append((c, m))       # its subtree is (or, from this piece, will be) the first's
+                    continue
+                if m is None:
+                    seen[d] = c
+                new.append(i)
+            if new:
+                keep = torch.tensor(new)
+                sub = child if len(new) == child.batch else child.select(keep)
+                del child
+                self.grow(sub, (hub_owner[keep], mem_owner[keep]), ids[keep], t + 1)
+                del sub
+            memo.update(seen)
+            for c, m in copies:
+                self._copy(c, m, t)
+
+    def _same_below(self, a: int, b: int, t: int) -> bool:
+        """Do level-t nodes a and b have the same suffixes below them (always so for all orders)?"""
+        tr = self.trie
+        la, ha, lb, hb = int(tr.lo[t][a]), int(tr.hi[t][a]), int(tr.lo[t][b]), int(tr.hi[t][b])
+        return ha - la == hb - lb and torch.equal(tr.rows[la:ha, t + 1:], tr.rows[lb:hb, t + 1:])
+
+    def _copy(self, node: int, like: int, t: int) -> None:
+        """The orders below level-t node `node` end as the corresponding ones below `like` (same suffixes)."""
+        tr = self.trie
+        lo, hi, src = int(tr.lo[t][node]), int(tr.hi[t][node]), int(tr.lo[t][like])
+        self.leaf_of[lo:hi] = self.leaf_of[src:src + hi - lo]
+        self._done(hi - lo)
+
+    def _done(self, k: int) -> None:
+        self.done += k
         if self.progress is not None:
             self.progress(self.done, self.N)
+
+    def _finish(self, leaves: Agent, ids: torch.Tensor, digests: list[bytes]) -> None:
+        """Final knowledge and probe error of the leaves (full orders), once per distinct final state."""
+        tic = time.perf_counter()
+        memo, new, result = self.memo[-1], [], []
+        for i, d in enumerate(digests):
+            r = memo.get(d)
+            if r is None:
+                r = memo[d] = len(self.leaf_keys) + len(new)
+                new.append(i)
+            result.append(r)
+        if new:
+            sub = leaves if len(new) == leaves.batch else leaves.select(torch.tensor(new))
+            pred = self._probe_predictions(sub)
+            self.leaf_pred.append(pred)
+            self.leaf_keys += knowledge_keys(sub.rules.state)
+            self.leaf_errors += [None if e is None else round(e, 4) for e in median_rel_errors(pred, self.truth)]
+        tr = self.trie
+        lo, hi = tr.lo[-1][ids], tr.hi[-1][ids]
+        self.leaf_of[lo] = torch.tensor(result)
+        for i in (hi - lo > 1).nonzero().flatten().tolist():   # an order given more than once
+            self.leaf_of[int(lo[i]):int(hi[i])] = result[i]
+        self.probe_s += time.perf_counter() - tic
+        self._done(int((hi - lo).sum()))
 
     def _probe_predictions(self, agents: Agent) -> torch.Tensor:
         """(B, n_probes) what each agent expects every probe to displace, learning frozen (as Experiment's)."""
         B = agents.batch
-        cols = [agents.predict({k: v.expand(B, *v.shape[1:]).contiguous() for k, v in m.items()})
-                for m in self.probe_meas]
+        cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1)).expected
+                for acts, present in self.probe_acts]
         return torch.stack(cols, dim=1) if cols else torch.zeros(B, 0)
