@@ -306,6 +306,7 @@ def canonicalise(agent: Agent, hub_owner: torch.Tensor, mem_owner: torch.Tensor)
     perm = torch.where(laid_out[:, None], perm, torch.arange(A))
     hub.branches = hub.branches[torch.arange(B)[:, None], perm]
     hub.branch_norm = hub.branch_norm[torch.arange(B)[:, None], perm]
+    hub.graded = hub.graded[torch.arange(B)[:, None], perm]
     colmap = torch.arange(cols).repeat(B, 1)
     colmap[:, :A * a] = (a * perm[:, :, None] + torch.arange(a)).flatten(1)                  # new column <- old
     rows = list(OBJECT_ROWS)
