@@ -253,7 +253,8 @@ def _agent_problem(e: dict) -> str | None:
     got = e["agent"]
     if set(got) != set(like):
         missing, extra = sorted(set(like) - set(got)), sorted(map(str, set(got) - set(like)))
-        return f"agent state: missing {missing[:3]}, unexpected {extra[:3]}"
+        return (f"agent state: missing {missing[:3]}, unexpected {extra[:3]} (written by another version of "
+                "aesop-torch? remake it with train/run.py)")
     for k, ref in like.items():
         v = got[k]
         if not isinstance(v, torch.Tensor) or v.shape != ref.shape or v.dtype != ref.dtype:
