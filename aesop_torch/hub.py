@@ -122,6 +122,10 @@ class ObjectHub(nn.Module):
             raise ValueError(f"present must be (B, P) = {(B, P)}, got {tuple(present.shape)}")
         return acts.to(self.branches.dtype), present.bool()
 
+    def _floored(self, pattern: torch.Tensor) -> torch.Tensor:
+        """A map's pattern as a graded branch holds it: units below `HubConfig.store_floor` left out."""
+        return torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
+
     # -- activity flows -----------------------------------------------------------------------------------------
     def bottom_up(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
         """Maps -> hub. acts (B, P, U_max) graded map activities, present (B, P) maps with input -> (B, N) in [0, 1].
@@ -153,10 +157,11 @@ class ObjectHub(nn.Module):
         acts, present = self._check(acts, present)
         if self.config.relative_activity:
             acts = _relative(acts)
-        # the input as a graded branch holds a pattern (nothing below store_floor), and its energy: a binary branch
-        # holds one unit at 1 whatever the input's width, so its input counts as energy 1
-        acts = torch.where(acts >= self.config.store_floor, acts, torch.zeros_like(acts))
-        energy = torch.where(self.graded[..., None], (acts ** 2).sum(-1)[:, None, :], torch.ones_like(self.branch_norm))
+        # the input as a graded branch holds a pattern, and its energy: a binary branch holds one unit at 1 whatever
+        # the input's width, so its input counts as energy 1
+        acts = self._floored(acts)
+        energy = torch.where(self.graded[..., None], (acts ** 2).sum(-1)[:, None, :],
+                             torch.ones_like(self.branch_norm))
         drive = torch.einsum("bpu,bapu->bap", acts, self.branches) / torch.maximum(self.branch_norm, energy) \
             .clamp_min(1e-12)
         gate = self.strength[:, None, :] * present[:, None, :] * (self.branch_norm > 0)   # (B, A, P)
@@ -244,8 +249,7 @@ class ObjectHub(nn.Module):
         present, mask = present.bool(), mask.bool()
         active = present & mask[:, None]
         if graded:
-            pattern = _relative(winners.to(self.branches.dtype))
-            pattern = torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
+            pattern = self._floored(_relative(winners.to(self.branches.dtype)))
             if (active & (pattern.sum(-1) == 0)).any():
                 raise ValueError("a present map has no activity to store")
         else:
@@ -410,3 +414,7 @@ class RewardCode:
         level = (coarse.long().argmax(-1) * c.fine + fine.long().argmax(-1)).double()
         value = (math.log(c.min_cm3) + level * self.step).exp().float()
         return torch.where(valid, value, torch.full_like(value, math.nan))
+
+    def stored(self, cm3) -> torch.Tensor:
+        """A volume as the memory holds it: encoded and decoded (within half a level, 0.7 %)."""
+        return self.decode(self.encode(cm3))
