@@ -23,8 +23,9 @@ Choices the paper leaves open, made here:
   explains its recalled rewards best (least residual variance per degree of freedom), all of them only where too
   few episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one
   does, and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line
-  (the default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which fit applies, when both exist, comes from the recalled fates too: a logistic
-  boundary over the properties not known irrelevant (heavy for its size sinks), read at the present object.
+  (the default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3).
+  Which fit applies, when both exist, comes from the recalled fates too: a logistic boundary over the properties
+  not known irrelevant (heavy for its size sinks), read at the present object.
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
@@ -223,6 +224,15 @@ class EpisodeStep:
         rank = torch.tensor([0, 3, 2, 1])[self.fired]          # S < U < G < E
         best = rank.max(dim=1).values
         return torch.tensor([STATUS_QUO, UNCERTAINTY, GROWTH, ELIMINATION])[best]
+
+
+def cannot_tell(unclear: torch.Tensor, contradicted: torch.Tensor, outcome_unclear: torch.Tensor) -> torch.Tensor:
+    """A comparison left out (the agent's and the batch answer's alike): the outcome in its dead zone, or a
+    contradiction that a property in its dead zone (unclear (..., P)) may have caused. Where the outcome held, such a
+    property did not change it: the properties that clearly changed still did nothing (generated sets of seeds
+    1000-1099: colour dominant in 0 sets instead of 12, when the felt mass of light colour twins fell in weight's dead
+    zone)."""
+    return (unclear.any(-1) & contradicted) | outcome_unclear
 
 
 def _check_words(phrase: str) -> None:
@@ -526,24 +536,26 @@ class Agent(nn.Module):
     @torch.no_grad()
     def step(self, measurement: dict, observed_cm3: torch.Tensor, goal_before: torch.Tensor,
              goal_after: torch.Tensor, learn: torch.Tensor | None = None,
-             sank: torch.Tensor | None = None) -> EpisodeStep:
+             sank: torch.Tensor | None = None, perceived: tuple | None = None) -> EpisodeStep:
         """One episode for every agent: the object was lifted (measurement), dropped (observed_cm3).
 
         goal_before / goal_after: (B,) bool, the ball reachable before / after the drop. learn: (B,) bool, agents
         that take part (default all). sank: (B,) bool, the object came to rest on the bottom (False: it floats);
         None when not seen (its comparisons then count in the mixed context, and it is stored without a fate).
+        perceived: (acts, present) as `activities(measurement)` gives them, when the caller has them already (a
+        population perceives each object once: the last bits of a perception depend on its batch).
         """
         B = self.batch
         learn = torch.ones(B, dtype=torch.bool) if learn is None else learn
         observed = torch.as_tensor(observed_cm3, dtype=torch.float32).reshape(B)
         fate = torch.full((B,), -1, dtype=torch.long) if sank is None else torch.as_tensor(sank).reshape(B).long()
-        a = self.anticipate(measurement)
+        a = self.anticipate_acts(*(self.activities(measurement) if perceived is None else perceived))
         recall = a.recall
         compared = recall.valid & learn[:, None]                                   # (B, K)
         K = compared.shape[1]
         context = context_of(fate[:, None].expand(B, K), a.fates)                  # (B, K)
         # the outcome as the memory will hold it, against the outcomes it holds: both read through the reward code
-        stored = self.reward.decode(self.reward.encode(observed))[:, None]
+        stored = self.reward.stored(observed)[:, None]
         delta_c = contradiction(stored, a.rewards, self.config.rules) & compared
         unclear_c = outcome_unclear(stored, a.rewards, self.config.rules)
         strength = self.hub.strength[:, :len(self.properties)]
@@ -553,12 +565,7 @@ class Agent(nn.Module):
             gate = self.rules.context_strength()[torch.arange(B), context[:, k]]
             dp, unclear = self.delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
                                               gate[:, None])
-            # a comparison that cannot tell is left out: the outcome in its dead zone, or a contradiction that a
-            # property in its dead zone may have caused. Where the outcome held, such a property did not change
-            # it: the properties that clearly changed still did nothing (measured on generated sets of seeds
-            # 1000-1099: colour dominant in 0 sets instead of 12, when the felt mass of light colour twins fell in
-            # weight's dead zone)
-            use = compared[:, k] & ~(unclear[:, 0].any(-1) & delta_c[:, k]) & ~unclear_c[:, k]
+            use = compared[:, k] & ~cannot_tell(unclear[:, 0], delta_c[:, k], unclear_c[:, k])
             dp = dp[:, 0] & use[:, None]
             delta_p.append(dp)
             skipped.append(compared[:, k] & ~use)
@@ -658,12 +665,12 @@ class Agent(nn.Module):
         change and no contradiction, as the agent leaves such a comparison out."""
         acts, _ = self.activities(measurement)
         values = self.decode(acts)
-        observed = self.reward.decode(self.reward.encode(torch.as_tensor(observed_cm3, dtype=torch.float32)))
+        observed = self.reward.stored(torch.as_tensor(observed_cm3, dtype=torch.float32))
         n = observed.shape[0]
         dp, unclear = self.delta_property(values, {p: v[None].expand(n, n, -1) for p, v in values.items()})
         dp, unclear = dp.transpose(0, 1), unclear.transpose(0, 1)                 # [i, j]: j against i
         dc = contradiction(observed[None, :], observed[:, None], self.config.rules)
-        skip = (unclear.any(-1) & dc) | outcome_unclear(observed[None, :], observed[:, None], self.config.rules)
+        skip = cannot_tell(unclear, dc, outcome_unclear(observed[None, :], observed[:, None], self.config.rules))
         fate = torch.as_tensor(sank).long()
         context = context_of(fate[:, None].expand(n, n), fate[None, :].expand(n, n))
         return dp & ~skip[..., None], dc & ~skip, context

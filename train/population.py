@@ -389,12 +389,9 @@ class _Walk:
             obj = trie.rows[rows, t]
             n_hub, n_mem = child.hub.n_assemblies.clone(), child.memory.count.clone()
             tic = time.perf_counter()
-            child.activities = lambda measurement: (self.acts[obj], self.present[obj])   # seen once, see perceive
-            try:
-                child.step({k: v[obj] for k, v in self.meas.items()}, self.observed[obj], self.before[obj],
-                           self.after[obj], sank=None if self.sank is None else self.sank[obj])
-            finally:
-                del child.activities
+            child.step({k: v[obj] for k, v in self.meas.items()}, self.observed[obj], self.before[obj],
+                       self.after[obj], sank=None if self.sank is None else self.sank[obj],
+                       perceived=(self.acts[obj], self.present[obj]))   # seen once, see perceive
             hub_owner = _owned(hub_owner, n_hub, child.hub.n_assemblies, obj)
             mem_owner = _owned(mem_owner, n_mem, child.memory.count, obj)
             if self.merge:
