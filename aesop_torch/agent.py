@@ -25,7 +25,8 @@ Choices the paper leaves open, made here:
   does, and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line
   (the default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3).
   Which fit applies, when both exist, comes from the recalled fates too: a logistic boundary over the properties
-  not known irrelevant (heavy for its size sinks), read at the present object.
+  not known irrelevant, size and shape again as the volume (heavy for the room it fills sinks), read at the present
+  object. Both fits and the probability are kept (Anticipation.by_fate, p_sink): a chooser can weigh the two.
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
@@ -182,6 +183,8 @@ class Anticipation:
     values: dict             # map name -> (B, dim) decoded bottom-up values
     recalled_values: dict    # map name -> (B, K, dim) values each recalled episode retro-activates
     fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
+    by_fate: torch.Tensor    # (B, 2) what it would displace if it floats, if it sinks (NaN: no episode of that fate)
+    p_sink: torch.Tensor     # (B,) how likely it sinks, by the recalled fates; `expected` takes the likelier fate
 
 
 @dataclass
@@ -322,9 +325,10 @@ class Agent(nn.Module):
         fates = self._fates(recall)
         values = self.decode(acts)
         recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes)))
-        expected = self.readout(self.features(values), self.features(recalled), rewards, fates,
-                                recall.strength * recall.valid)
-        return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates)
+        by_fate, p_sink = self.readout_by_fate(self.features(values), self.features(recalled), rewards, fates,
+                                               recall.strength * recall.valid)
+        return Anticipation(self.expected_of(by_fate, p_sink), rewards, recall, acts, present, values, recalled,
+                            fates, by_fate, p_sink)
 
     @staticmethod
     def _assemblies(episodes: torch.Tensor) -> torch.Tensor:
@@ -357,6 +361,21 @@ class Agent(nn.Module):
         """The expected displacement (B,) of objects with features x (B, F) from recalled episodes with features
         xk (B, K, F), rewards (B, K) cm^3, fates (B, K) and weights (B, K) (0 for an invalid recall); NaN where
         nothing was recalled. See the module docstring."""
+        return self.expected_of(*self.readout_by_fate(x, xk, rewards, fates, weight))
+
+    @staticmethod
+    def expected_of(by_fate: torch.Tensor, p_sink: torch.Tensor) -> torch.Tensor:
+        """(B,) the displacement of the likelier fate where both have a fit, else of the one that has (NaN: none)."""
+        have = ~torch.isnan(by_fate)
+        chosen = by_fate.gather(1, (p_sink > 0.5).long()[:, None])[:, 0]
+        single = torch.nan_to_num(by_fate, nan=float("inf")).amin(-1)           # the one context with a fit
+        out = torch.where(have.all(-1), chosen, single)
+        return torch.where(have.any(-1), out, torch.full_like(out, float("nan")))
+
+    def readout_by_fate(self, x: torch.Tensor, xk: torch.Tensor, rewards: torch.Tensor, fates: torch.Tensor,
+                        weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+        """`readout`'s parts: (B, 2) the displacement each fate's fit reads at the object (floats, sinks; NaN where
+        no recalled episode had that fate) and (B,) the probability that it sinks."""
         B, K, F = xk.shape
         dtype = x.dtype
         # in float64: fits on a few episodes whose properties move together are ill-conditioned, and float32
@@ -395,15 +414,11 @@ class Agent(nn.Module):
         pick = torch.where(ok.any(-1), score.argmin(-1), torch.full_like(score[..., 0], P, dtype=torch.long))
         pred = beta[..., 0].gather(-1, pick[..., None])[..., 0]                   # (B, 2) log cm^3
         pred = torch.where(total > 0, pred, torch.full_like(total, float("nan")))
-        both = (total > 0).all(-1)
         # which fit applies: will it float or sink? Learned from the recalled episodes' fates, a logistic boundary
-        # over the properties not known irrelevant (heavy for its size sinks), read at the present object
-        sinks = self._will_sink(feature_columns(self.rules.state != IRRELEVANT), xk - x[:, None], fates, weight)
-        chosen = pred.gather(1, (sinks > 0.5).long()[:, None])[:, 0]
-        single = torch.nan_to_num(pred, nan=float("inf")).amin(-1)               # the one context with a fit
-        out = torch.where(both, chosen, single)
-        out = torch.where((total > 0).any(-1), out, torch.full_like(out, float("nan")))
-        return out.exp().to(dtype)
+        # over the properties not known irrelevant, with size and shape as the volume, as in the fit (heavy for the
+        # room it fills sinks), read at the present object
+        dv, cv = as_volume(xk - x[:, None], feature_columns(self.rules.state != IRRELEVANT))
+        return pred.exp().to(dtype), self._will_sink(cv, dv, fates, weight).to(dtype)
 
     def _will_sink(self, cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: torch.Tensor,
                    steps: int = 12) -> torch.Tensor:

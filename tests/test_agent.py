@@ -297,3 +297,30 @@ def test_the_recall_bound_changes_nothing_while_the_memory_holds_no_more_episode
     assert agent.memory.count.item() <= 8 and results[1][2] <= 8
     assert torch.equal(results[0][0], results[1][0]) and torch.equal(results[0][1], results[1][1])
     assert results[0][2] == results[1][2]
+
+
+def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
+    """Cubes and spheres, each floating and sinking (sinks: mass above its volume, fill x size^3). A 5 cm sphere
+    fills 65 cm^3, about a 4 cm cube: at 120 g it sinks, at 35 g it floats, though it is larger than every cube (a
+    boundary on size and fill apart is unsure of the 120 g one: P(sinks) 0.70).
+    by_fate holds what it would displace either way (its mass if it floats, its volume if it sinks)."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
+    agent.rules.dominant[0, 1, 1] = agent.rules.dominant[0, 1, 2] = True    # sinking: shape and size
+    ball = math.pi / 6
+
+    def feat(fill, size_cm, mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(mass_g)])
+
+    episodes = [(1.0, 3.0, 15.0), (1.0, 3.0, 50.0), (1.0, 4.0, 40.0), (1.0, 4.0, 100.0),
+                (ball, 6.0, 70.0), (ball, 6.0, 200.0), (ball, 7.0, 120.0), (ball, 7.0, 300.0)]
+    sank = [m > f * s ** 3 for f, s, m in episodes]
+    xk = torch.stack([feat(*e) for e in episodes])[None]
+    y = torch.tensor([[f * s ** 3 if k else m for (f, s, m), k in zip(episodes, sank)]])
+    fates = torch.tensor([sank]).long()
+    volume = ball * 125.0
+    for mass, sinks in ((120.0, True), (35.0, False)):
+        by_fate, p_sink = agent.readout_by_fate(feat(ball, 5.0, mass)[None], xk, y, fates, torch.ones(1, 8))
+        assert by_fate[0].tolist() == pytest.approx([mass, volume], rel=1e-3)
+        assert (p_sink.item() > 0.9) if sinks else (p_sink.item() < 0.1)
+        assert agent.expected_of(by_fate, p_sink).item() == pytest.approx(volume if sinks else mass, rel=1e-3)
