@@ -55,7 +55,7 @@ from .encoders import (FUNCTION_WORDS, GOAL_WORDS, PROPERTIES, VOCABULARY, WORD_
                        default_map_configs, encode_words, train_property_maps, unknown_words, word_activity)
 from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode, _relative
 from .memory import EpisodicMemory, MemoryConfig
-from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
+from .rules import (ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
                     context_of, contradiction, outcome_unclear)
 from .som import SelfOrganizingMap
 
@@ -382,10 +382,12 @@ class Agent(nn.Module):
         # rounding (which differs with the batch an agent is computed in) would move the answer by percents
         x, xk, weight = x.double(), torch.nan_to_num(xk).double(), (weight * ~torch.isnan(rewards)).double()
         y = torch.nan_to_num(rewards, nan=1.0).clamp_min(1e-3).double().log()
-        # each context follows its own dominant properties; one without evidence of its own those dominant
-        # anywhere that it has not eliminated
+        # each context follows its own dominant properties; one without evidence of its own every property it has
+        # not eliminated and not known irrelevant, and its rewards pick among them (below). Following another
+        # context's dominant ones instead read sinkers by their weight where only floaters had been compared
+        # (median novel-object error after 8 episodes 9.0 % that way, 8.9 % this; tuning seeds 1000-1099)
         dom = self.rules.dominant[:, :2]
-        fallback = (self.rules.state == DOMINANT)[:, None] & ~self.rules.eliminated[:, :2]
+        fallback = (self.rules.state != IRRELEVANT)[:, None] & ~self.rules.eliminated[:, :2]
         follow = torch.where(dom.any(-1, keepdim=True), dom, fallback)           # (B, 2, P)
         # candidate fits per context: each followed property alone, and all of them together (the last)
         P = follow.shape[-1]
