@@ -35,6 +35,7 @@ import torch  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from sim.water import Water  # noqa: E402
 from sim.world import World  # noqa: E402
+from cli_args import count  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 from train.physics import cores  # noqa: E402
 
@@ -126,7 +127,7 @@ def against(commit: str, runs: int) -> float | None:
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--baseline", default="19ce05e", help="commit to run the default experiment against")
-    ap.add_argument("--runs", type=int, default=3, help="default runs of each tree (medians)")
+    ap.add_argument("--runs", type=count, default=3, help="default runs of each tree (medians)")
     args = ap.parse_args()
     torch.set_num_threads(1)   # as in the runner's workers
     print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}")

@@ -48,6 +48,7 @@ from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.population import knowledge_keys  # noqa: E402
 from train.progress import Step  # noqa: E402
+from cli_args import count, seed  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 PNG = Path(__file__).with_name("generalization.png")
@@ -165,10 +166,10 @@ def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sets", type=int, default=100)
-    ap.add_argument("--long-sets", type=int, default=30)
-    ap.add_argument("--orders", type=int, default=24)
-    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--sets", type=count, default=100)
+    ap.add_argument("--long-sets", type=count, default=30)
+    ap.add_argument("--orders", type=count, default=24)
+    ap.add_argument("--first-seed", type=seed, default=0)
     a = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.perf_counter()

@@ -34,6 +34,7 @@ from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.progress import Step  # noqa: E402
+from cli_args import at_least, count, seed  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 CHECKS = (8, 16, 32, 64, 128, 230)
@@ -75,9 +76,9 @@ def life(seed: int, n_train: int, bar) -> dict:
 
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--sets", type=int, default=5)
-    ap.add_argument("--objects", type=int, default=230)
-    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--sets", type=count, default=5)
+    ap.add_argument("--objects", type=at_least(8), default=230)
+    ap.add_argument("--first-seed", type=seed, default=0)
     a = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.perf_counter()

@@ -27,6 +27,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 import numpy as np  # noqa: E402
 import pybullet as p  # noqa: E402
 
+from cli_args import count, seed  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 from sim.episode import _take  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects  # noqa: E402
@@ -169,8 +170,8 @@ def main(args) -> None:
 
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--per-pose", type=int, default=10, help="objects per shape and pose (default 10)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--per-pose", type=count, default=10, help="objects per shape and pose (default 10)")
+    ap.add_argument("--seed", type=seed, default=0)
     ap.add_argument("--fit", action="store_true", help="also drop the default objects and print the noise model")
     a = ap.parse_args()
     with recorded("perception", enabled=(a.per_pose == 10 and a.seed == 0 and not a.fit)):

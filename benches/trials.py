@@ -42,6 +42,7 @@ from sim.trial import (closed_form_drop, drops_to_goal, heaviest_first, optimal_
 from train.experiment import Experiment, closed_form_outcomes, draw_orders  # noqa: E402
 from train.progress import Step  # noqa: E402
 from train.trials import roomy_copy, run_trials  # noqa: E402
+from cli_args import count, seed  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
 
 CROWS = ROOT / "sim" / "tasks" / "crows.json"
@@ -123,11 +124,11 @@ def generated(seeds: range, orders: int, stands: int) -> dict:
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", type=int, default=20, help="seeds of the crows' tasks (each: maps, noise, orders)")
-    ap.add_argument("--orders", type=int, default=8, help="random orders of the exploration per seed or set")
-    ap.add_argument("--sets", type=int, default=100, help="generated object sets")
-    ap.add_argument("--stands", type=int, default=4, help="trials drawn per generated set")
-    ap.add_argument("--first-seed", type=int, default=0)
+    ap.add_argument("--seeds", type=count, default=20, help="seeds of the crows' tasks (each: maps, noise, orders)")
+    ap.add_argument("--orders", type=count, default=8, help="random orders of the exploration per seed or set")
+    ap.add_argument("--sets", type=count, default=100, help="generated object sets")
+    ap.add_argument("--stands", type=count, default=4, help="trials drawn per generated set")
+    ap.add_argument("--first-seed", type=seed, default=0)
     a = ap.parse_args(argv)
     torch.set_num_threads(1)
     t0 = time.perf_counter()

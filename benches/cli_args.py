@@ -1,0 +1,24 @@
+"""argparse types for the benches' counts and seeds: a bad value is one line from argparse (exit 2), never a
+traceback halfway through a run (e.g. `--sets 0` dividing by zero sets after minutes of work)."""
+
+from __future__ import annotations
+
+import argparse
+
+
+def at_least(low: int):
+    """An argparse type: a whole number >= low."""
+    def parse(text: str) -> int:
+        try:
+            n = int(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+        if n < low:
+            raise argparse.ArgumentTypeError(f"must be >= {low}, got {n}")
+        return n
+    parse.__name__ = f"whole number >= {low}"
+    return parse
+
+
+count = at_least(1)   # sets, seeds, orders, runs: at least one, or there is nothing to measure
+seed = at_least(0)    # numpy's generators take no negative seed
