@@ -135,11 +135,11 @@ def test_choice_rule_by_hand():
     # an unknown need: the largest; nothing anticipated: explore
     assert choose([120.0, 250.0], math.inf, g)[0] == 1
     assert choose([math.nan, math.nan], 200.0, g)[1] is True
-    # among equal drops, one whose fate the agent is sure of goes before a larger one it is not sure of; fewer
-    # drops still come first
-    assert choose([250.0, 300.0], 200.0, g, [True, False])[0] == 0
-    assert choose([250.0, 300.0], 200.0, g, [False, True])[0] == 1
-    assert choose([150.0, 300.0], 200.0, g, [True, False])[0] == 1
+    # ties in drops go to the largest displacement expected over the fates: a sure 250 before a 300 that floats
+    # at 100 with probability 0.4 (average 220); fewer drops still come first
+    assert choose([250.0, 300.0], 200.0, g, [250.0, 220.0])[0] == 0
+    assert choose([250.0, 300.0], 200.0, g)[0] == 1
+    assert choose([150.0, 300.0], 200.0, g, [150.0, 220.0])[0] == 1
 
 
 def test_physics_water_is_not_reset_between_the_drops_of_a_trial():

@@ -13,9 +13,9 @@ rise the goal needs is read from the episodes that come back: the displacements 
 reachable (each episode stores the body state after the drop). A phrase that names no goal the agent knows is
 refused (ValueError, one line): the agent does not try what it was not asked. The choice is the candidate with the
 fewest expected drops to close the remaining gap (1 if its anticipated displacement closes it, else 1 + the fewest
-of the rest); among equals, one whose fate the agent is sure of (Anticipation.p_sink: an object between a floater
-and a sinker of its size may go either way) before one it is not, then the largest anticipated displacement; with
-no estimate of the need yet, simply the largest.
+of the rest), ties to the largest displacement it expects over the two fates the object may meet, each at the
+probability the agent gives it (Anticipation.by_fate, p_sink: an object between a floater and a sinker of its size
+may go either way); with no estimate of the need yet, simply the largest.
 An agent that recalls nothing for any candidate (a novice) explores: a random choice from a generator seeded by the
 run's seed and the trial. How sure each anticipation is goes into the record: the strongest recall's strength and
 how many recalled episodes agree with it.
@@ -39,9 +39,6 @@ from sim.trial import fewest_drops, optimal_first, random_drops_mean, reach_cm3
 from train.experiment import stack_measurements
 
 TRIAL_SEED = 0x7121A1   # mixed into the run's seed for the novice's random choices
-# a fate the agent gives at least this probability (Anticipation.p_sink, either way) is one it is sure of: 9 in 10
-# keeps an object between a floater and a sinker of its size (p ~ 0.4-0.7) apart from those the recalled fates place
-SURE = 0.9
 
 
 def roomy_copy(agent: Agent, extra: int) -> Agent:
@@ -100,14 +97,15 @@ def _expected_drops(expected: list[float], gap: float) -> list[float]:
 
 
 def choose(expected: list[float], gap: float, generator: torch.Generator,
-           sure: list[bool] | None = None) -> tuple[int, bool, list[float]]:
-    """(index chosen, explored, expected drops per candidate). See the module docstring. sure (optional): per
-    candidate, whether the agent is sure of its fate; among equal drops a sure one goes first."""
+           average: list[float] | None = None) -> tuple[int, bool, list[float]]:
+    """(index chosen, explored, expected drops per candidate). See the module docstring. average (optional): per
+    candidate the displacement expected over the fates it may meet; ties in drops go to the largest of it (default:
+    the anticipated displacement itself)."""
     if all(math.isnan(x) for x in expected):
         return int(torch.randint(len(expected), (1,), generator=generator)), True, [math.nan] * len(expected)
     drops = _expected_drops(expected, gap)
-    sure = sure or [True] * len(expected)
-    key = lambda i: (math.isnan(expected[i]), drops[i], not sure[i], -expected[i])
+    average = expected if average is None else average
+    key = lambda i: (math.isnan(expected[i]), drops[i], -average[i])
     return min(range(len(expected)), key=key), False, drops
 
 
@@ -146,7 +144,7 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
             # anticipate every candidate on the stand, all agents at once (each agent's own candidates)
             width = max(len(left[b]) for b in range(B) if active[b])
             exp = torch.full((B, width), math.nan)
-            p_sink = torch.zeros(B, width)
+            average = torch.full((B, width), math.nan)
             strength = torch.zeros(B, width)
             agree = torch.zeros(B, width, dtype=torch.long)
             for j in range(width):
@@ -154,7 +152,10 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
                       for b in range(B)]
                 a = agent.anticipate(_with_names(ms, [left[b][j] if active[b] and j < len(left[b]) else stand[0]
                                                       for b in range(B)], names))
-                exp[:, j], p_sink[:, j] = a.expected, a.p_sink
+                exp[:, j] = a.expected
+                # over both fates where both have a fit, each at the probability the agent gives it
+                both = a.p_sink * a.by_fate[:, 1] + (1 - a.p_sink) * a.by_fate[:, 0]
+                average[:, j] = torch.where(torch.isnan(both), a.expected, both)
                 valid = a.recall.valid & ~torch.isnan(a.rewards)
                 strength[:, j] = (a.recall.strength * valid).amax(-1)
                 agree[:, j] = (valid & ~contradiction(a.expected[:, None], a.rewards, tol)).sum(-1)
@@ -163,8 +164,7 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
                 if active[b]:
                     n = len(left[b])
                     e = exp[b, :n].tolist()
-                    sure = [max(p, 1.0 - p) >= SURE for p in p_sink[b, :n].tolist()]
-                    k, explored, drops = choose(e, float(need[b]) - total[b], g, sure)
+                    k, explored, drops = choose(e, float(need[b]) - total[b], g, average[b, :n].tolist())
                     picks[b] = left[b][k]
                     r = rec[b]
                     r["chosen"].append(picks[b])
