@@ -98,8 +98,8 @@ class MemoryConfig:
     # seeds 1000-1039 agreed in all 24 orders in 87.5 % at 0.05, 97.5 % at 0.001; seeds 1000-1099 at 0.001 lost
     # two more sets, whose sinkers cued each other at 0.0009 one way and 0.0016 the other.
     min_strength: float = 1e-6
-    # most episodes recalled for one cue, a bound for speed: the default experiment encodes at most its 8 training
-    # objects, so it never cuts a recall there (longer runs recall their 8 strongest).
+    # most episodes recalled for one cue, a bound for speed: a memory holding no more episodes is never cut (the
+    # agent sets 16: AgentConfig; a longer life recalls its 16 strongest).
     max_recalls: int = 8
     # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the
     # (256, 1000) working tensors in cache; of 16 to 1024, 256 was fastest for 984 cues against 230 of the agent's

@@ -262,7 +262,7 @@ def throughput_section():
         agent, _, life_cues, _, probe_cues = agent_life(SEED, 230)
         mask = agent._episode_neurons().to(life_cues.dtype)   # as Agent.anticipate_acts cues its memory
         cues = torch.cat([life_cues, probe_cues]) * mask
-        for k in (1, MemoryConfig().max_recalls):
+        for k in (1, MemoryConfig().max_recalls, AgentConfig().memory.max_recalls):   # the library's, the agent's
             throughput_line(f"230 of the agent's episodes (set {SEED}), its 230 objects and 16 probes as cues, "
                             f"max_recalls={k}", agent.memory, copy_into(DenseEpisodicMemory, agent.memory), cues, k)
         agents = 4096

@@ -280,8 +280,9 @@ def test_a_property_in_its_dead_zone_leaves_out_a_contradiction_but_not_a_held_o
 
 
 def test_the_recall_bound_changes_nothing_while_the_memory_holds_no_more_episodes():
-    """max_recalls = 8 is a bound for speed: with at most 8 episodes stored (the default experiment's 8 objects) the
-    network brings back the same episodes, and the agent learns and predicts the same, as with no bound at all."""
+    """max_recalls is a bound for speed (16 in the agent): with no more episodes stored than it (here 8, as in the
+    default experiment) the network brings back the same episodes, and the agent learns and predicts the same, as
+    with no bound at all."""
     results = []
     for bound in (8, 64):
         cfg = AgentConfig(seed=0)
