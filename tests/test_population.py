@@ -309,3 +309,16 @@ def test_closed_form_outcomes_sink_by_volume_float_by_mass(world):
     assert heavy["goal_after"] and not light["goal_after"] and not heavy["goal_before"]
     assert heavy["measurement"]["mass_g"] == 420.0 and set(probes) == {
         "purple_heavy_cylinder", "white_light_cylinder", "grey_heavy_cube", "orange_light_box", "pink_light_cylinder"}
+
+
+def test_probe_predictions_in_one_call_equal_one_call_per_probe(world):
+    """Experiment.probe_predictions predicts every (order, probe) in one call on copies of the agents; a cue's recall
+    and readout do not depend on its batch, so it equals predicting each probe for the orders on their own."""
+    names, probe_names, outcomes, probes = world
+    orders = [[0, 1, 2, 3, 4, 5, 6, 7], [7, 6, 5, 4, 3, 2, 1, 0], [3, 1, 4, 0, 5, 2, 7, 6]]
+    exp = Experiment(list(names), probe_names, orders)
+    exp.probes = probes
+    for _ in range(4):
+        exp.step(lambda name, b, t: outcomes[name])
+        one_by_one = torch.stack([exp.predict(probes[p]["measurement"]) for p in probe_names], 1)
+        assert torch.equal(exp.probe_predictions(), one_by_one)

@@ -179,15 +179,18 @@ class Experiment:
         return self.agent.predict(stack_measurements([measurement] * len(self.orders)))
 
     def probe_predictions(self) -> torch.Tensor:
-        """(B, n_probes) expected cm^3 for every probe object, learning frozen: every (order, probe) in one call, on
-        copies of the agents (a cue's recall and readout do not depend on the batch it is in; 5 calls of 4 cost
-        ~5x one of 20)."""
+        """(B, n_probes) expected cm^3 for every probe object, learning frozen, as `predict` gives them probe by
+        probe: each probe is perceived as there (the last bits of a perception depend on its batch), then every
+        (order, probe) is recalled and read out in one call on copies of the agents (recall and readout do not
+        depend on the batch; 5 calls of 4 cost ~5x one of 20)."""
         B, n = len(self.orders), len(self.probe_names)
         if n == 0:
             return torch.zeros(B, 0)
+        seen = [self.agent.activities(stack_measurements([self.probes[name]["measurement"]] * B))
+                for name in self.probe_names]
+        acts, present = (torch.stack([s[i] for s in seen], 1).flatten(0, 1) for i in (0, 1))   # order-major
         agents = self.agent.select(torch.arange(B).repeat_interleave(n))
-        meas = stack_measurements([self.probes[name]["measurement"] for _ in range(B) for name in self.probe_names])
-        return agents.predict(meas).view(B, n)
+        return agents.anticipate_acts(acts, present).expected.view(B, n)
 
     def probe_errors(self) -> list[float | None]:
         pred = self.probe_predictions()
