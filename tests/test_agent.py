@@ -325,3 +325,41 @@ def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
         assert by_fate[0].tolist() == pytest.approx([mass, volume], rel=1e-3)
         assert (p_sink.item() > 0.9) if sinks else (p_sink.item() < 0.1)
         assert agent.expected_of(by_fate, p_sink).item() == pytest.approx(volume if sinks else mass, rel=1e-3)
+
+
+def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
+    """Sinkers never compared yet (nothing dominant for them) while weight is dominant for floaters: the sinkers'
+    fit tries every property not eliminated nor known irrelevant and keeps the one their rewards follow (size, here
+    exactly: they displace their volume), instead of reading them by the floaters' weight. Their masses do not
+    follow their volumes (200, 150, 400 g for 3, 4, 5 cm), so a fit on weight misses the 4.5 cm one."""
+    from aesop_torch.rules import DOMINANT
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 3] = True                  # floating: weight
+    agent.rules.state[0, 3] = DOMINANT
+    fill = math.pi / 4
+
+    def feat(size_cm, mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(mass_g)])
+
+    sinkers = [(3.0, 200.0), (4.0, 150.0), (5.0, 400.0)]
+    xk = torch.stack([feat(*s) for s in sinkers])[None]
+    y = torch.tensor([[fill * s ** 3 for s, _ in sinkers]])
+    got = agent.readout(feat(4.5, 300.0)[None], xk, y, torch.ones(1, 3, dtype=torch.long), torch.ones(1, 3))
+    assert got.item() == pytest.approx(fill * 4.5 ** 3, rel=1e-3)
+
+
+def test_the_agent_recalls_more_than_the_librarys_eight():
+    """The agent's recall bound is 16: with 12 distinct objects stored, a cue brings back more than 8 of them (the
+    network's own number, every episode the cue touches)."""
+    cfg = AgentConfig(seed=0)
+    cfg.memory.max_episodes = cfg.hub.max_assemblies = 12
+    agent = Agent(cfg)
+    for i in range(12):
+        d = 3.0 + 0.3 * i
+        m, v, sinks = cylinder(RED if i % 2 else BLUE, d, 1.6 * d, 50.0 + 40.0 * i)
+        agent.step(m, torch.tensor([v]), torch.zeros(1, dtype=torch.bool), torch.zeros(1, dtype=torch.bool),
+                   sank=torch.tensor([sinks]))
+    stored = agent.memory.count.item()
+    m, _, _ = cylinder(RED, 4.4, 7.0, 260.0)
+    recalled = agent.anticipate(m).recall.valid.sum().item()
+    assert stored > 8 and 8 < recalled <= stored
