@@ -132,6 +132,30 @@ def test_level_solve_is_exact_for_prisms(client):
     assert water.submerged_volume(lying) == 0.0 and water.depth / CM == pytest.approx(3.0, rel=1e-9)
 
 
+
+def test_a_sphere_half_under_holds_half_its_volume(client):
+    # a 6 cm sphere held with its centre 5 cm up, and just enough water for the level to settle there: the solve
+    # must find L = 5 cm, the wet half 2/3 pi r^3 (36 pi cm^3), its centre of buoyancy 3r/8 below the centre, and
+    # the waterplane the sphere's equator (closed form: the cap pi h^2 (3r - h) / 3)
+    A, r = 36 * math.pi, 3.0
+    half = 2 / 3 * math.pi * r ** 3
+    water = Water(client, [0.0, 0.0], 0.0, 0.06, (A * 5.0 - half) * CM ** 3, 1 / 240)
+    ball = make_body(client, "sphere", [0.06] * 3, 0.1, (0, 1, 0), [0.0, 0.0, 0.05], 0.5)
+    water.add_body(ball, "sphere", [0.06] * 3)
+    water.update_level()
+    assert water.depth / CM == pytest.approx(5.0, abs=1e-8)
+    assert water.submerged_volume(ball) / CM ** 3 == pytest.approx(half, rel=1e-8)
+    body = water.bodies[ball]
+    assert body.cob[2] / CM == pytest.approx(5.0 - 3 * r / 8, abs=1e-6)
+    assert body.waterplane / CM ** 2 == pytest.approx(math.pi * r * r, rel=1e-6)
+    # sunk 2 cm into the floor the sphere is no longer whole in the jar: its points are used, and the floor cuts off
+    # a 2 cm cap (pi 2^2 (9 - 2) / 3 cm^3); the rest, its top 4 cm up, is under water. The points resolve the cut
+    # to half a cell (0.19 cm) of the 8 pi cm^2 section; the closed form, blind to the floor, would say 36 pi
+    p.resetBasePositionAndOrientation(ball, [0.0, 0.0, 0.01], [0, 0, 0, 1], physicsClientId=client)
+    water.update_level()
+    assert water.submerged_volume(ball) / CM ** 3 == pytest.approx(4 / 3 * math.pi * r ** 3 - 28 * math.pi / 3,
+                                                                   abs=8 * math.pi * 0.19)
+
 @pytest.mark.parametrize("shape, size", [("cylinder", (0.05, 0.05, 0.08)), ("sphere", (0.06,) * 3),
                                          ("box", (0.04, 0.05, 0.06))])
 def test_sample_points_fill_the_shape(shape, size):
