@@ -19,13 +19,41 @@ The palm frame: +z is the palm normal (out of the palm), +x runs from the wrist 
 
 from __future__ import annotations
 
+import importlib.util
+import sys
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 
 import torch
-import pytorch_kinematics as pk
-from pytorch_kinematics.transforms import rotation_conversions as rc
+
+
+def _chain_modules():
+    """pytorch-kinematics' URDF chain builder and rotation conversions, without running its package __init__ yet.
+
+    That __init__ also imports its IK and SDF modules and, with them, matplotlib: 0.36 s of the package's 0.58 s
+    import, on the critical path of every run (the runner imports the simulator before it forks its workers).
+    Only the chain and the rotations are used here. The package is registered as it is (its __init__ not run),
+    and its first attribute nothing defines yet runs that __init__: `import pytorch_kinematics as pk;
+    pk.PseudoInverseIK` works as ever, with the same module objects."""
+    if "pytorch_kinematics" not in sys.modules:
+        spec = importlib.util.find_spec("pytorch_kinematics")
+        package = importlib.util.module_from_spec(spec)
+
+        def rest(name: str):
+            if importlib.util.find_spec(f"{spec.name}.{name}") is not None:   # a submodule: `from . import chain`
+                return importlib.import_module(f"{spec.name}.{name}")
+            del package.__getattr__          # once: the __init__ defines what the package offers
+            spec.loader.exec_module(package)
+            return getattr(package, name)
+        package.__getattr__ = rest
+        sys.modules[spec.name] = package
+    from pytorch_kinematics.transforms import rotation_conversions
+    from pytorch_kinematics.urdf import build_serial_chain_from_urdf
+    return build_serial_chain_from_urdf, rotation_conversions
+
+
+build_serial_chain_from_urdf, rc = _chain_modules()
 
 from sim.robot import ARM_JOINTS, HAND_LINK, ROOT_LINK, RobotConfig, icub_urdf_path, parsed_urdf
 
@@ -120,7 +148,7 @@ class ArmKinematics:
                  device: str | torch.device = "cpu", config: IKConfig | None = None, end_link: str = HAND_LINK):
         self.dtype, self.device, self.config = dtype, torch.device(device), config or IKConfig()
         text = _kinematic_urdf(Path(urdf_path) if urdf_path else icub_urdf_path(), end_link)
-        self.chain = pk.build_serial_chain_from_urdf(text, end_link, ROOT_LINK).to(dtype=dtype, device=self.device)
+        self.chain = build_serial_chain_from_urdf(text, end_link, ROOT_LINK).to(dtype=dtype, device=self.device)
         names = tuple(self.chain.get_joint_parameter_names())
         if names != ARM_JOINTS:
             raise ValueError(f"chain {ROOT_LINK}->{end_link} has joints {names}, expected {ARM_JOINTS}")

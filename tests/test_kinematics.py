@@ -255,3 +255,18 @@ def test_load_refuses_bad_posture():
         load_icub(-1, config=RobotConfig(body_posture=(("l_elbow", 0.0),)))  # below its 15 degree limit
     with pytest.raises(ValueError, match="base_position"):
         load_icub(-1, base_position=(0.0, 0.0))
+
+
+def test_the_simulator_leaves_pytorch_kinematics_whole_and_matplotlib_out():
+    """sim.kinematics loads only pytorch-kinematics' chain and rotations (its package __init__ pulls in matplotlib);
+    the package is still whole for whoever imports it after: the same module objects, its IK solver there."""
+    import subprocess
+    import sys
+    code = ("import sys, sim.world, sim.kinematics as k; assert 'matplotlib' not in sys.modules; "
+            "import pytorch_kinematics as pk; from pytorch_kinematics import SerialChain; "
+            "assert pk.PseudoInverseIK and pk.transforms.Transform3d and SerialChain; "
+            "assert pk.build_serial_chain_from_urdf is k.build_serial_chain_from_urdf and pk.chain.SerialChain is "
+            "SerialChain; assert 'matplotlib' in sys.modules; print('ok')")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert out.returncode == 0 and out.stdout.strip().endswith("ok"), out.stderr[-2000:]
