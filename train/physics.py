@@ -24,6 +24,7 @@ imports can print a traceback), and the runner ends the pool, says one line and 
 
 from __future__ import annotations
 
+import importlib
 import multiprocessing as mp
 import os
 import signal
@@ -56,6 +57,11 @@ def _simulate(world, job: tuple):
         from sim.trial import simulate_sequence
         return simulate_sequence(world, what, record or None)
     return world.run_episode(what, record=record)
+
+
+def _by_name(target: str, args: tuple):
+    module, name = target.split(":")
+    return getattr(importlib.import_module(module), name)(*args)
 
 
 def cores() -> int:
@@ -123,7 +129,11 @@ class Physics:
 
     def call(self, fn, *args):
         """fn(*args) on a worker (in this process when there are none): an object whose get() waits for the
-        result. fn must be importable by name (it is pickled)."""
+        result. fn must be importable by name (it is pickled), or be given as its name, "module:function": then
+        only the process that runs it imports its module (the runner draws Figure 2 on a worker without importing
+        matplotlib itself: 0.45 s off its critical path)."""
+        if isinstance(fn, str):
+            fn, args = _by_name, (fn, args)
         if self.workers == 1:
             return _Ready(fn(*args))
         self.start()

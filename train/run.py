@@ -428,8 +428,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             if not per_episode:
                 bar.update(1, recs[0]["object"])
     # Figure 2 shows the exploration: drawn and written on a worker while the population and the goal trials run
-    from train.figures import save_figure2
-    figure = physics.call(save_figure2, exp.records, out / "figure2.png")
+    figure = physics.call("train.figures:save_figure2", exp.records, out / "figure2.png")
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
     if len(orders) > len(exp.orders):
