@@ -55,7 +55,8 @@ class FakePhysics:
         return results
 
     def call(self, fn, *args):
-        value = fn(*args)
+        import train.physics
+        value = train.physics.by_name(fn, args) if isinstance(fn, str) else fn(*args)
         return types.SimpleNamespace(get=lambda: value)
 
     def drops(self, names, record=False, progress=None):

@@ -59,7 +59,8 @@ def _simulate(world, job: tuple):
     return world.run_episode(what, record=record)
 
 
-def _by_name(target: str, args: tuple):
+def by_name(target: str, args: tuple):
+    """target(*args) for target "module:function", its module imported here (see Physics.call)."""
     module, name = target.split(":")
     return getattr(importlib.import_module(module), name)(*args)
 
@@ -133,7 +134,7 @@ class Physics:
         only the process that runs it imports its module (the runner draws Figure 2 on a worker without importing
         matplotlib itself: 0.45 s off its critical path)."""
         if isinstance(fn, str):
-            fn, args = _by_name, (fn, args)
+            fn, args = by_name, (fn, args)
         if self.workers == 1:
             return _Ready(fn(*args))
         self.start()
