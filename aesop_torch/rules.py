@@ -4,7 +4,8 @@ The paper gives the rules as a truth table over two comparisons of the present w
 DeltaProperty (a property map's bottom-up activity differs from the activity the episode retro-activates) and
 DeltaContradiction (the observed reward differs from the episode's). It leaves open what happens when evidence
 conflicts across episodes, and when several properties change at once. Here every comparison is kept as evidence
-and the knowledge is a function of the evidence *set*, so it cannot depend on the order the evidence came in:
+and the knowledge is a function of the evidence *set*, so it cannot depend on the order the evidence came in (but
+for the withdrawal of a context's eliminations below):
 
 - Contexts. A sinker displaces its volume and a floater its weight, so whether a property matters depends on the
   regime: size and shape decide a sinker's displacement and not a floater's, weight the other way round. The robot
@@ -14,7 +15,11 @@ and the knowledge is a function of the evidence *set*, so it cannot depend on th
   alone changed (besides properties already eliminated there; several changes at once may cancel), unless it also
   changed alone while the outcome moved (a clean Growth outweighs it: that change may have been too small to
   show). Its pathway no longer retro-activates in this context, so later comparisons there no longer see it
-  change.
+  change. An outcome that then moves while nothing the context still sees changed shows that an eliminated
+  property mattered after all (a held comparison can hide a change that another cancelled: larger but hollower,
+  with the size change in its dead zone): the context's held comparisons are forgotten, its pathways
+  retro-activate again, and what they show is judged afresh. This is the one place where the evidence is not
+  simply kept, so the order can matter; it never fires while no elimination is wrong.
 - Growth (the outcome changed, and so did the properties in its change set): at least one of the changed
   properties matters. One changed property is the paper's clean case; several at once are a confound.
 - Dominant in a context: the properties of the minimal explanations. An explanation is a set of properties, none
@@ -161,6 +166,11 @@ class CausalRules(nn.Module):
         # a property eliminated now may not be once a clean Growth shows up
         raw = delta_p & compared[:, None]
         changed = (raw.long() * self._weights).sum(-1)                              # the change set's index
+        # the outcome moved while nothing the context still sees changed: a property eliminated there mattered after
+        # all (its change was hidden by another's: larger but hollower). The held comparisons that eliminated it
+        # are forgotten, so its pathways retro-activate there again and what they show is judged afresh
+        hidden = dc[:, 0] & ~raw.any(-1) & self.eliminated[rows, ctx].any(-1)
+        self.held[rows[hidden], ctx[hidden]] = False
         self.held[rows, ctx, changed] |= ~dc[:, 0] & raw.any(-1)
         self.contradicted[rows, ctx, changed] |= dc[:, 0] & raw.any(-1)
         self.uncertain_count += (~dp & dc).long()

@@ -161,12 +161,39 @@ def test_several_changes_that_hold_eliminate_nothing():
     assert rules.eliminated[0, SINKING].tolist() == [False, True, True, False]
 
 
+def test_an_outcome_that_moves_with_nothing_seen_changed_withdraws_the_context_eliminations():
+    """The cascade above: shape held alone, so a larger-but-hollower sinker pair counted as size alone, and both went
+    for sinkers. Two sinkers whose outcome then moved while nothing the context still sees changed (shape and size
+    no longer retro-activate there) show that an eliminated property mattered: the sinking context's held evidence
+    is forgotten, its pathways retro-activate again, and the same pair now shows both changes: no verdict. The
+    floaters' elimination stays, and colour is judged afresh for sinkers."""
+    rules = CausalRules()
+    fire(rules, dp(C), False, context=FLOATING)
+    fire(rules, dp(SH, SI), False, context=SINKING)
+    fire(rules, dp(SH), False, context=SINKING)
+    assert rules.eliminated[0, SINKING].tolist() == [False, True, True, False]
+    fire(rules, dp(), True, context=SINKING)          # nothing seen changed, the outcome moved
+    assert rules.eliminated[0, SINKING].tolist() == [False, False, False, False]
+    assert rules.eliminated[0, FLOATING].tolist() == [True, False, False, False]
+    fire(rules, dp(SH, SI), False, context=SINKING)
+    assert not rules.eliminated[0, SINKING].any()
+    fire(rules, dp(C), False, context=SINKING)
+    assert rules.eliminated[0, SINKING].tolist() == [True, False, False, False]
+    # where nothing was eliminated such an outcome is noise and forgets nothing
+    other = CausalRules()
+    fire(other, dp(SH), False, context=FLOATING)
+    fire(other, dp(), True, context=SINKING)
+    assert other.eliminated[0, FLOATING].tolist() == [False, True, False, False]
+    assert other.held[0, FLOATING].any()
+
+
 def test_knowledge_does_not_depend_on_the_order_of_the_evidence():
     g = torch.Generator().manual_seed(7)
     for _ in range(30):
         n = 12
         changed = torch.rand(n, 4, generator=g) < 0.4
-        contra = torch.rand(n, generator=g) < 0.5
+        # every contradicted comparison shows a change: one that shows none withdraws eliminations (test above)
+        contra = (torch.rand(n, generator=g) < 0.5) & changed.any(-1)
         ctx = torch.randint(3, (n,), generator=g)
         states = set()
         for _ in range(4):
