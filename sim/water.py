@@ -21,8 +21,8 @@ function, piecewise linear in the points, from the previous level; two or three 
 the surface only: a point more than a cell below it is wet at any level close to the last one, one above it dry.
 
 Cost: measured against evaluating every point every step (the previous version, same machine, 2026-12-01), 120 ->
-46 us per step for the ball alone and 350 -> 125 us with a floating cylinder beside it; `python
-benches/episode_speed.py` prints the cost per step of a drop episode beside pybullet's own step.
+46 us per step for the ball alone (its points; now a cap) and 350 -> 125 us with a floating cylinder beside it;
+`python benches/episode_speed.py` prints the cost per step of a drop episode beside pybullet's own step.
 
 The robot's links neither float nor displace water: only registered bodies do (the dropped object and the ball).
 Units: metres, kilograms, seconds (pybullet's).
