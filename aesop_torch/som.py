@@ -54,7 +54,8 @@ class SOMConfig:
     # only. Categorical data need it: the batch SOM cannot split two categories that once shared a unit (each
     # unit settles on the mean of its samples), the online SOM's sample-by-sample updates can.
     ordering_iterations: int = 0
-    # samples per chunk when computing distances to all units, so memory stays bounded (chunk x units floats).
+    # samples per chunk when computing distances to all units, so memory stays bounded (chunk x units floats); a
+    # chunk also holds at most 2^20 distances (see `_chunks`).
     chunk_size: int = 8192
 
     def __post_init__(self):
@@ -102,8 +103,12 @@ class SelfOrganizingMap(nn.Module):
         return torch.addmm((w * w).sum(-1), x, w.T, alpha=-2.0).argmin(-1)
 
     def _chunks(self, x: torch.Tensor):
-        for i in range(0, x.shape[0], self.config.chunk_size):
-            yield x[i:i + self.config.chunk_size]
+        # at most 2^20 distances a chunk: a block of 5000 samples x 900 units (36 MB in float64) is allocated afresh,
+        # page by page, at every call, and made a batch epoch of a 30x30 map 4x slower than blocks of 1165 samples
+        # (same BMUs: each row's distances do not depend on the block)
+        step = max(1, min(self.config.chunk_size, (1 << 20) // self.n_units))
+        for i in range(0, x.shape[0], step):
+            yield x[i:i + step]
 
     def winner(self, x) -> torch.Tensor:
         """(..., dim) -> (...) long: index of the best matching unit (lowest index on ties)."""

@@ -44,8 +44,9 @@ LEARNING_RATE = 0.5        # MiniSom's default
 
 
 def numpy_batch_som(data, w0, rows, cols, sigma, sigma_end, epochs):
-    """Batch SOM in numpy, the algorithm of `SelfOrganizingMap.train_batch`: BMUs by squared distance, per-unit sums
-    by bincount, the gaussian neighbourhood applied along rows and then columns (it factorises)."""
+    """Batch SOM in numpy, the algorithm of `SelfOrganizingMap.train_batch`: BMUs by squared distance in the same
+    blocks of samples (at most 2^20 distances each), per-unit sums by bincount, the gaussian neighbourhood applied
+    along rows and then columns (it factorises)."""
     n, d = rows * cols, data.shape[1]
     w = w0.copy()
     dr2 = (np.arange(rows)[:, None] - np.arange(rows)) ** 2.0
@@ -53,7 +54,9 @@ def numpy_batch_som(data, w0, rows, cols, sigma, sigma_end, epochs):
     x2 = (data * data).sum(1)
     for e in range(epochs):
         radius = sigma * (sigma_end / sigma) ** (e / (epochs - 1) if epochs > 1 else 1.0)
-        bmu = (x2[:, None] - 2.0 * data @ w.T + (w * w).sum(1)).argmin(1)
+        step, w2 = max(1, min(8192, (1 << 20) // n)), (w * w).sum(1)
+        bmu = np.concatenate([(x2[i:i + step, None] - 2.0 * data[i:i + step] @ w.T + w2).argmin(1)
+                              for i in range(0, len(data), step)])
         sums = np.stack([np.bincount(bmu, data[:, k], n) for k in range(d)] + [np.bincount(bmu, None, n)], 1)
         hr, hc = np.exp(dr2 / (-2.0 * radius ** 2)), np.exp(dc2 / (-2.0 * radius ** 2))
         smooth = (hr @ sums.reshape(rows, cols * (d + 1))).reshape(rows, cols, d + 1)

@@ -94,6 +94,16 @@ def test_batch_chunking_does_not_change_the_result():
     assert torch.allclose(maps[0], maps[1], atol=1e-6)
 
 
+def test_a_large_map_takes_its_samples_in_blocks_and_finds_the_same_winners():
+    """30x30 units: at most 2^20 distances a block, so 3000 samples go in 3 blocks of 1165; each sample's winner is
+    still the argmin of its distances to every unit, computed here in one piece."""
+    som = SelfOrganizingMap(SOMConfig(rows=30, cols=30, dim=3)).double()
+    som.weights.copy_(torch.rand(900, 3, generator=torch.Generator().manual_seed(1), dtype=torch.float64))
+    data = torch.rand(3000, 3, generator=torch.Generator().manual_seed(2), dtype=torch.float64)
+    assert [len(c) for c in som._chunks(data)] == [1165, 1165, 670]
+    assert torch.equal(som.winner(data), torch.cdist(data, som.weights).argmin(-1))
+
+
 def test_pca_init_spans_the_data_along_its_principal_axis():
     data = torch.tensor([[0.0, 0.0], [1.0, 0.0], [2.0, 0.0], [3.0, 0.0], [4.0, 0.0]])
     som = SelfOrganizingMap(SOMConfig(rows=1, cols=5, dim=2))
