@@ -94,7 +94,7 @@ class Physics:
         if self.workers == 1 or self._pool is not None:
             return
         if START_METHOD == "fork":
-            import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.8 s each)
+            import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
         ctx = mp.get_context(START_METHOD)
         main = threading.current_thread() is threading.main_thread()   # only it may set handlers
         previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
