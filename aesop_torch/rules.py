@@ -19,7 +19,8 @@ for the withdrawal of a context's eliminations below):
   property mattered after all (a held comparison can hide a change that another cancelled: larger but hollower,
   with the size change in its dead zone): the context's held comparisons are forgotten, its pathways
   retro-activate again, and what they show is judged afresh. This is the one place where the evidence is not
-  simply kept, so the order can matter; it never fires while no elimination is wrong.
+  simply kept, so the order can matter. It fires only on an outcome that nothing seen explains: after a wrong
+  elimination, or where changes each too small to be called one add up.
 - Growth (the outcome changed, and so did the properties in its change set): at least one of the changed
   properties matters. One changed property is the paper's clean case; several at once are a confound.
 - Dominant in a context: the properties of the minimal explanations. An explanation is a set of properties, none

@@ -38,6 +38,8 @@ def _chain_modules():
     pk.PseudoInverseIK` works as ever, with the same module objects."""
     if "pytorch_kinematics" not in sys.modules:
         spec = importlib.util.find_spec("pytorch_kinematics")
+        if spec is None:
+            raise ImportError("pytorch_kinematics is not installed (`make test` or `make run` installs it)")
         package = importlib.util.module_from_spec(spec)
 
         def rest(name: str):
