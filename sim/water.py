@@ -98,9 +98,9 @@ def sample_points(shape: str, size_xyz: np.ndarray, n: int) -> tuple[np.ndarray,
     return pts, weights, size / k
 
 
-def _cap_volume(h, r):
-    """Volume of a sphere's cap of depth h (0 <= h <= 2r), m^3."""
-    return np.pi * h * h * (3.0 * r - h) / 3.0
+def _cap(h, r):
+    """A sphere's cap of depth h (0 <= h <= 2r): its volume (m^3) and the area of its flat face (m^2, dV/dh)."""
+    return np.pi * h * h * (3.0 * r - h) / 3.0, np.pi * h * (2.0 * r - h)
 
 
 def quat_to_matrix(q) -> np.ndarray:
@@ -238,10 +238,9 @@ class Water:
             if lo <= L <= hi or not cut:
                 break
         self.level = L
-        for b, pos in caps:
-            h = min(max(L - (pos[2] - b.radius), 0.0), 2.0 * b.radius)
+        for (b, pos), h in zip(caps, np.clip(L - bottoms, 0.0, 2.0 * radii).tolist()):
             r = b.radius
-            b.v_sub, b.waterplane = _cap_volume(h, r), math.pi * h * (2.0 * r - h)
+            b.v_sub, b.waterplane = _cap(h, r)
             # the cap's centroid lies 3 (2r - h)^2 / (4 (3r - h)) below the centre (r for h -> 0, 0 for h = 2r)
             b.cob = pos - [0.0, 0.0, 3.0 * (2.0 * r - h) ** 2 / (4.0 * (3.0 * r - h))] if h > 0 else None
         for (b, pos, _, w, _), (w_near, z_near, layer, _, wet, near) in zip(cut, parts):
@@ -270,9 +269,9 @@ class Water:
         L = self.level
         for _ in range(c.level_max_iterations):
             u = 0.5 + (L - z) / layer
-            h = np.clip(L - bottoms, 0.0, 2.0 * radii)
-            f = L - fixed - (w @ np.clip(u, 0.0, 1.0) + _cap_volume(h, radii).sum()) / self.area
-            slope = 1.0 - (w_per_layer @ ((u > 0) & (u < 1)) + (np.pi * h * (2.0 * radii - h)).sum()) / self.area
+            cap, face = _cap(np.clip(L - bottoms, 0.0, 2.0 * radii), radii)
+            f = L - fixed - (w @ np.clip(u, 0.0, 1.0) + cap.sum()) / self.area
+            slope = 1.0 - (w_per_layer @ ((u > 0) & (u < 1)) + face.sum()) / self.area
             step = f / slope
             L -= step
             if abs(step) < c.level_tolerance_m:
