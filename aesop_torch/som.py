@@ -55,7 +55,7 @@ class SOMConfig:
     # unit settles on the mean of its samples), the online SOM's sample-by-sample updates can.
     ordering_iterations: int = 0
     # samples per chunk when computing distances to all units, so memory stays bounded (chunk x units floats); a
-    # chunk also holds at most 2^20 distances (see `_chunks`).
+    # chunk also holds at most 2^20 distances (see `rows_per_chunk`).
     chunk_size: int = 8192
 
     def __post_init__(self):
@@ -102,11 +102,16 @@ class SelfOrganizingMap(nn.Module):
         w = self.weights
         return torch.addmm((w * w).sum(-1), x, w.T, alpha=-2.0).argmin(-1)
 
+    @property
+    def rows_per_chunk(self) -> int:
+        """Samples whose distances to every unit are computed at once: config.chunk_size, and at most 2^20
+        distances. A block of 5000 samples x 900 units (36 MB in float64) is allocated afresh, page by page, at every
+        call, and made a batch epoch of a 30x30 map 4x slower than blocks of 1165 samples (same BMUs: each row's
+        distances do not depend on the block)."""
+        return max(1, min(self.config.chunk_size, (1 << 20) // self.n_units))
+
     def _chunks(self, x: torch.Tensor):
-        # at most 2^20 distances a chunk: a block of 5000 samples x 900 units (36 MB in float64) is allocated afresh,
-        # page by page, at every call, and made a batch epoch of a 30x30 map 4x slower than blocks of 1165 samples
-        # (same BMUs: each row's distances do not depend on the block)
-        step = max(1, min(self.config.chunk_size, (1 << 20) // self.n_units))
+        step = self.rows_per_chunk
         for i in range(0, x.shape[0], step):
             yield x[i:i + step]
 

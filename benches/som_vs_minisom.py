@@ -18,13 +18,16 @@ Run: python benches/som_vs_minisom.py
 """
 
 import datetime
+import os
 import statistics
 import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import torch
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):   # numpy's BLAS on one thread too,
+    os.environ.setdefault(_var, "1")                                          # as torch (set before numpy loads)
+import numpy as np  # noqa: E402
+import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
@@ -43,10 +46,10 @@ SEEDS, REPEATS = (0, 1, 2), 3
 LEARNING_RATE = 0.5        # MiniSom's default
 
 
-def numpy_batch_som(data, w0, rows, cols, sigma, sigma_end, epochs):
-    """Batch SOM in numpy, the algorithm of `SelfOrganizingMap.train_batch`: BMUs by squared distance in the same
-    blocks of samples (at most 2^20 distances each), per-unit sums by bincount, the gaussian neighbourhood applied
-    along rows and then columns (it factorises)."""
+def numpy_batch_som(data, w0, rows, cols, sigma, sigma_end, epochs, step):
+    """Batch SOM in numpy, the algorithm of `SelfOrganizingMap.train_batch`: BMUs by squared distance in blocks of
+    `step` samples (ours: `SelfOrganizingMap.rows_per_chunk`), per-unit sums by bincount, the gaussian neighbourhood
+    applied along rows and then columns (it factorises)."""
     n, d = rows * cols, data.shape[1]
     w = w0.copy()
     dr2 = (np.arange(rows)[:, None] - np.arange(rows)) ** 2.0
@@ -54,7 +57,7 @@ def numpy_batch_som(data, w0, rows, cols, sigma, sigma_end, epochs):
     x2 = (data * data).sum(1)
     for e in range(epochs):
         radius = sigma * (sigma_end / sigma) ** (e / (epochs - 1) if epochs > 1 else 1.0)
-        step, w2 = max(1, min(8192, (1 << 20) // n)), (w * w).sum(1)
+        w2 = (w * w).sum(1)
         bmu = np.concatenate([(x2[i:i + step, None] - 2.0 * data[i:i + step] @ w.T + w2).argmin(1)
                               for i in range(0, len(data), step)])
         sums = np.stack([np.bincount(bmu, data[:, k], n) for k in range(d)] + [np.bincount(bmu, None, n)], 1)
@@ -120,7 +123,7 @@ def run(side: int) -> tuple[float, float]:
             return som.weights.numpy()
 
         def numpy_batch():
-            return numpy_batch_som(d, w_pca, side, side, sigma, sigma / 3, EPOCHS)
+            return numpy_batch_som(d, w_pca, side, side, sigma, sigma / 3, EPOCHS, pca.rows_per_chunk)
 
         t_o, t_p, a, b = side_by_side(ours_online, minisom_online)
         rows["on_t"] += t_o
