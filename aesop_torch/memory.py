@@ -141,7 +141,7 @@ def _fire(a: torch.Tensor, row_k: torch.Tensor, threshold: float, finite: bool =
     """k_winners as 0 / 1 in a's (floating) dtype: torch's CPU kernels that write bool are several times slower
     than its float ones (a comparison into bool, 74 us for 128 sheets; into float, 13 us)."""
     fire = torch.gt(a, threshold, out=torch.empty_like(a))
-    k = row_k.expand(a.shape[:-1])
+    k = row_k.to(a.dtype).expand(a.shape[:-1])    # compared with fire's counts: one dtype, the fast kernel
     # a row with at most k_r neurons above threshold fires them all; only the others need ranking (and a row with a
     # NaN, which the ranking puts first)
     crowded = fire.sum(-1) > k
@@ -149,7 +149,7 @@ def _fire(a: torch.Tensor, row_k: torch.Tensor, threshold: float, finite: bool =
         crowded |= torch.isnan(a).any(-1)
     if not bool(crowded.any()):
         return fire
-    a, k = a[crowded], k[crowded][:, None]                  # (n, C), (n, 1)
+    a, k = a[crowded], k[crowded][:, None].long()           # (n, C), (n, 1)
     kmax = int(k.max())
     if kmax > 3 or (not finite and bool(torch.isnan(a).any())):   # a sort (topk ranks NaN above everything)
         kth = a.topk(kmax, dim=-1).values.gather(-1, k - 1)
@@ -202,6 +202,10 @@ class _Net(NamedTuple):
     inv: torch.Tensor | None = None
     gain: torch.Tensor | None = None
     q: torch.Tensor | None = None
+    # the depressed states' neurons as flat gather / scatter indices (the padding moved to neuron N - 1) and a mask
+    # that is 0 on the padding
+    z_at: torch.Tensor | None = None
+    z_real: torch.Tensor | None = None
     # one memory for all cues: its active neurons pattern by pattern and its patterns neuron by neuron, as the
     # indices and bag offsets of embedding_bag (cols, starts, owners, firsts)
     lists: tuple | None = None
@@ -210,18 +214,21 @@ class _Net(NamedTuple):
         if i.dtype == torch.bool:
             i = i.nonzero().flatten()
         return _Net(self.idx if self.idx.shape[0] == 1 else self.idx.index_select(0, i),
-                    *(t if t is None else t.index_select(0, i) for t in self[1:8]), self.lists)
+                    *(t if t is None else t.index_select(0, i) for t in self[1:10]), self.lists)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
 
     def ready(self) -> "_Net":
-        """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0), sigma / sigma and 1 - p."""
+        """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0), sigma / sigma, 1 - p and
+        the depressed states' indices."""
         p = self.mean()
         q = 1 - p
         sigma = (p * q).sqrt()
         inv = torch.where(sigma > 1e-6, 1.0 / sigma.clamp_min(1e-6), torch.zeros_like(sigma))
-        return self._replace(p=p, inv=inv, gain=sigma * inv, q=q)
+        flat, N = self.z.flatten(1), p.shape[1]
+        return self._replace(p=p, inv=inv, gain=sigma * inv, q=q, z_at=flat.clamp(max=N - 1),
+                             z_real=(flat < N).to(p.dtype))
 
     def predict(self, d: torch.Tensor, zscore: bool = True) -> torch.Tensor:
         """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean, d~ = d / sigma, and
@@ -261,9 +268,9 @@ class _Net(NamedTuple):
             # the padding entries (neuron N) gather and scatter zeros at neuron N - 1: a running sum from 0 is never
             # -0, so adding a zero of either sign leaves it as it was
             r, L = self.z.shape[1:]
-            flat, of = self.z.flatten(1), _owners(r, L, d.device)
-            real = (flat < N).to(d.dtype)
-            flat = flat.clamp(max=N - 1)
+            of = _owners(r, L, d.device)
+            net = self if self.z_at is not None else self.ready()
+            flat, real = net.z_at, net.z_real
             w = d.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), d.gather(1, flat) * real)   # (B, r) = Z d
             h.scatter_add_(1, flat, w.neg_().index_select(1, of) * real)
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)

@@ -29,6 +29,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
@@ -125,6 +126,7 @@ def against(commit: str, runs: int) -> float | None:
 
 
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser()
     ap.add_argument("--baseline", default="19ce05e", help="commit to run the default experiment against")
     ap.add_argument("--runs", type=count, default=3, help="default runs of each tree (medians)")

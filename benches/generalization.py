@@ -37,6 +37,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
@@ -165,6 +166,7 @@ def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool
 
 
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sets", type=count, default=100)
     ap.add_argument("--long-sets", type=count, default=30)

@@ -24,6 +24,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
@@ -75,6 +76,7 @@ def life(seed: int, n_train: int, bar) -> dict:
 
 
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sets", type=count, default=20)   # the median of 5 sets moved with any one of them
     ap.add_argument("--objects", type=at_least(8), default=230)

@@ -17,6 +17,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
@@ -41,6 +42,7 @@ def median_s(fn, repeats: int) -> float:
 
 
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     load_experiment(CKPT)   # warm-up: first-call costs out of the figure
     load_s = median_s(lambda: load_experiment(CKPT), 15)
     cold = [float(subprocess.run([sys.executable, "-c", COLD.format(root=str(ROOT), ckpt=str(CKPT))],

@@ -38,6 +38,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig  # noqa: E402
 from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners  # noqa: E402
@@ -323,6 +324,7 @@ def best_rate(fn, n_items: int, repeats: int = 3) -> float:
 
 @torch.no_grad()
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     t0 = time.perf_counter()
     print("random episodes, recalled from the 50 object-row neurons (fraction exact); classical hopfield cued")
     print("with those 50 neurons right and the other 950 zero / random, or with the whole pattern 10 % flipped")

@@ -23,6 +23,7 @@ import time
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pybullet as p  # noqa: E402
@@ -134,6 +135,7 @@ def fit(results: list[dict], world: World) -> None:
 
 
 def main(args) -> None:
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     rng = np.random.default_rng(args.seed)
     world = World(load_objects(DEFAULT_OBJECTS_FILE), seed=args.seed)
     world.look(world.place_on_stand("red_heavy_cylinder"))   # warm-up: first-call costs out of the times

@@ -27,6 +27,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
@@ -83,6 +84,7 @@ def timed_run(args: list, tmp: str) -> float:
 
 
 def main():
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     argv = sys.argv[1:]
     repeats = int(argv[argv.index("--repeats") + 1]) if "--repeats" in argv else 3
     population_section(repeats)

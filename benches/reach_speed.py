@@ -32,6 +32,7 @@ import pytorch_kinematics as pk
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from sim.kinematics import ArmKinematics, IKConfig  # noqa: E402
 from sim.robot import HAND_PARENT_LINK, load_icub, quiet_c_output  # noqa: E402
@@ -73,6 +74,7 @@ def median_run(fn) -> tuple[float, torch.Tensor]:
 
 
 def main() -> None:
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}, 1 thread; {N_TARGETS} targets per "
           f"seed in box {BOX_LO}..{BOX_HI} (root frame, m), seeds {SEEDS}, {REPEATS} repeats; success = within "

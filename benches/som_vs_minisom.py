@@ -30,6 +30,7 @@ import numpy as np  # noqa: E402
 import torch  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.som import SelfOrganizingMap, SOMConfig  # noqa: E402
 from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
@@ -40,6 +41,7 @@ try:
 except ImportError:
     sys.exit("benches/som_vs_minisom.py needs MiniSom: pip install minisom")
 
+keep_freed_memory()   # for the peer in this process too (aesop_torch/malloc.py)
 torch.set_num_threads(1)   # MiniSom's numpy work on these small arrays runs on one core too
 SAMPLES, UPDATES, EPOCHS = 5000, 50_000, 10
 SEEDS, REPEATS = (0, 1, 2), 3

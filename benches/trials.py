@@ -30,6 +30,7 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
@@ -123,6 +124,7 @@ def generated(seeds: range, orders: int, stands: int) -> dict:
 
 
 def main(argv=None) -> None:
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=count, default=20, help="seeds of the crows' tasks (each: maps, noise, orders)")
     ap.add_argument("--orders", type=count, default=8, help="random orders of the exploration per seed or set")

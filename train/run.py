@@ -192,8 +192,11 @@ def prepare(args, objects, n_orders: int):
     checked."""
     import torch
 
+    from aesop_torch.malloc import keep_freed_memory
     from train.experiment import Experiment, draw_orders
     from train.summary import FULL_RUNS
+
+    keep_freed_memory()   # freed tensors are reused rather than faulted in again (aesop_torch/malloc.py)
 
     # small tensors (at most 64 agents in detail) run faster on one thread than on two fighting each other, and so
     # does building the experiment (its maps' training took 6.9 s on 2 threads of a busy machine, 0.3 s on 1); a
