@@ -21,19 +21,22 @@ The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not availab
 - Inhibition: each row has its own inhibitory pool, a k-winners-take-all: at most k_r neurons of row r fire, and
   only those predicted above `threshold`, so a row with no support stays empty.
 - Recall: the object row (or rows, `cue_rows`) is clamped to the graded cue while the other rows (unknown at first:
-  d = 0) complete the pattern, then it is released and the whole sheet runs freely to a fixed point, so the object
-  row becomes a stored
-  binary code rather than the graded cue. Strength = cue . xi_obj / |xi_obj|, the mean cue activity on the recalled
-  object code. After each retrieval the retrieved state is transiently depressed (anti-Hebbian: its outer product
-  and its share of the mean are taken out for the rest of this recall, i.e. a retrieved stored episode is as if
-  not stored) and retrieval restarts from the same cue, until the strength drops below `min_strength`, the state
-  is not a fixed point, nothing is left, or `max_recalls` episodes were recalled. Results: strongest first.
+  d = 0) complete the pattern, then it is released and the whole sheet runs freely to a fixed point, so the object row
+  becomes a stored binary code rather than the graded cue. Strength = cue . xi_obj / |xi_obj|, the mean cue activity
+  on the recalled object code. After each retrieval the retrieved state is transiently depressed (anti-Hebbian: its
+  outer product and its share of the mean are taken out for the rest of this recall, i.e. a retrieved stored episode
+  is as if not stored) and retrieval restarts from the same cue, until the strength drops below `min_strength`, the
+  state is not a fixed point, nothing is left, or `max_recalls` episodes were recalled. Results: strongest first.
 
 Nothing dense is stored: J is a sum of outer products, so J d = X^T (X d) - S (S . d) / n - diag(J) d is computed
 from the stored patterns X (B, max_episodes, 20, 50) bool, their sum S and count n. X d and X^T (X d) are gathers and
 scatters over each pattern's active neurons (~40 of 1000; z-scored, only those that vary across the stored episodes),
-with the additions in one fixed order: a cue's recall does not depend on the batch it is computed in or on the
-thread count. `weights(b)` and `mean_activity(b)` give the dense network of one agent for inspection and tests.
+with the additions in one fixed order, and every sum over the sheet taken row by row and then over the 20 rows: a
+cue's recall does not depend on the batch it is computed in or on the thread count. A depressed state that is a
+stored pattern has its term in X d masked; any other (a spurious fixed point, ~1.5 % of the recalls from 230 of the
+agent's episodes) is subtracted as Z^T (Z d). A recall leaves out the rows that hold one code in every stored
+episode (they settle at it and are no evidence) and writes that code back. `weights(b)` and `mean_activity(b)` give
+the dense network of one agent for inspection and tests.
 """
 
 from __future__ import annotations
@@ -183,6 +186,10 @@ def active_neurons(x: torch.Tensor, width: int | None = None) -> torch.Tensor:
     return out[..., :width]
 
 
+_PER_CUE = frozenset({"total", "n", "z", "keep", "p", "inv", "gain", "q", "z_at", "z_real"})
+_PER_MEMORY = frozenset({"idx", "sizes", "held", "common"})   # 1 (one memory for all cues) or B
+
+
 @functools.lru_cache(maxsize=64)
 def _owners(M: int, L: int, device) -> torch.Tensor:
     """(M * L,) the pattern each entry of the flattened (M, L) index lists belongs to: 0, 0, ..., 1, 1, ..."""
@@ -192,12 +199,14 @@ def _owners(M: int, L: int, device) -> torch.Tensor:
 class _Net(NamedTuple):
     """The factorised network seen by a batch of cues: the stored patterns as the indices of their active neurons
     idx (1 or B, M, L) (shared or per cue, padded with N), and per cue the sum of the patterns still in play (B, N),
-    their number (B, 1) and the depressed states' active neurons (B, r, L'). The per-cue constants of a settle (mean
-    p, 1 / sigma, sigma / sigma, 1 - p) are computed once by `ready` and carried along."""
+    their number (B, 1), which stored patterns are in play (B, M; 1 or 0) and the depressed states that were no
+    stored pattern as their active neurons (B, r, L'). The per-cue constants of a settle (mean p, 1 / sigma,
+    sigma / sigma, 1 - p) are computed once by `ready` and carried along."""
     idx: torch.Tensor
     total: torch.Tensor
     n: torch.Tensor
     z: torch.Tensor
+    keep: torch.Tensor | None = None
     p: torch.Tensor | None = None
     inv: torch.Tensor | None = None
     gain: torch.Tensor | None = None
@@ -209,15 +218,35 @@ class _Net(NamedTuple):
     # one memory for all cues: its active neurons pattern by pattern and its patterns neuron by neuron, as the
     # indices and bag offsets of embedding_bag (cols, starts, owners, firsts)
     lists: tuple | None = None
+    # to tell a state that is a stored pattern (1 or B, ...): each pattern's neurons in idx (M), the neurons idx
+    # holds (N) and the neurons outside them that every stored pattern has (N)
+    sizes: torch.Tensor | None = None
+    held: torch.Tensor | None = None
+    common: torch.Tensor | None = None
+    # the sheet rows the network spans (rows, as a tensor, the sheet's row count), each one's k-WTA, and where the
+    # cue rows sit among them; a recall leaves out the rows that hold one code in every stored episode
+    layout: tuple | None = None
+    row_k: torch.Tensor | None = None
+    cue_at: tuple | None = None
 
     def take(self, i: torch.Tensor) -> "_Net":
         if i.dtype == torch.bool:
             i = i.nonzero().flatten()
-        return _Net(self.idx if self.idx.shape[0] == 1 else self.idx.index_select(0, i),
-                    *(t if t is None else t.index_select(0, i) for t in self[1:10]), self.lists)
+        pick = {f: t.index_select(0, i) for f, t in zip(self._fields, self)
+                if f in _PER_CUE and t is not None or f in _PER_MEMORY and t.shape[0] != 1}
+        return self._replace(**pick)
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
+
+    def sheet_sum(self, v: torch.Tensor) -> torch.Tensor:
+        """(B, rows * cols) -> (B, 1): each row summed, then the whole sheet's row sums in their places (0 for a row
+        the layout leaves out, where every term is 0), so a sum never depends on the layout or the batch."""
+        rows, at, R = self.layout
+        r = v.view(v.shape[0], len(rows), -1).sum(-1)
+        if len(rows) != R:
+            r = v.new_zeros(v.shape[0], R).index_copy_(1, at, r)
+        return r.sum(1, keepdim=True)
 
     def ready(self) -> "_Net":
         """The same network with its per-cue constants: p, 1 / sigma (0 where sigma = 0), sigma / sigma, 1 - p and
@@ -236,11 +265,33 @@ class _Net(NamedTuple):
         rule. A neuron that never varies (sigma = 0) is predicted at its mean and is no evidence for the others."""
         net = self if self.p is not None else self.ready()
         if not zscore:
-            return net.p + net.covariance_product(d) / ((d * d).sum(1, keepdim=True) - d * d).clamp(min=_EPS)
+            sq = d * d
+            return net.p + net.covariance_product(d) / (net.sheet_sum(sq) - sq).clamp(min=_EPS)
         dz = d * net.inv
         h = net.covariance_product(dz * net.inv)                 # J (D^-1 d~); times D^-1 and sigma below: 1
         sq = dz * dz
-        return net.p + h * net.gain / (sq.sum(1, keepdim=True) - sq).clamp(min=_EPS)
+        return net.p + h * net.gain / (net.sheet_sum(sq) - sq).clamp(min=_EPS)
+
+    def forward(self, d: torch.Tensor) -> torch.Tensor:
+        """X d for d (B, N): (M, B) for one memory shared by all cues (embedding_bag's layout), else (B, M)."""
+        if self.lists is not None:
+            # d.T made contiguous with strides (B, 1): for one cue .contiguous() keeps strides (1, N), on which
+            # embedding_bag takes a path 18x slower
+            dt = d.T.clone(memory_format=torch.contiguous_format)
+            return torch.nn.functional.embedding_bag(self.lists[0], dt, self.lists[1], mode="sum")
+        B, (M, L) = d.shape[0], self.idx.shape[1:]
+        de = torch.nn.functional.pad(d, (0, 1))                  # neuron N: the padding, always 0
+        of = _owners(M, L, d.device).expand(B, -1)
+        return de.new_zeros(B, M).scatter_add_(1, of, de.gather(1, self.idx.flatten(1)))
+
+    def stored(self, x: torch.Tensor) -> torch.Tensor:
+        """For states x (B, N) bool: the first stored pattern still in play that equals each, or -1 (B,) long."""
+        u = self.forward(x.to(self.total.dtype))
+        shared = u.T if self.lists is not None else u                 # (B, M): the shared neurons, counted
+        inside = (x & self.held).sum(1, keepdim=True)
+        same = (shared == self.sizes) & (self.sizes == inside) & (self.keep > 0) & \
+            ((x & ~self.held) == self.common).all(1, keepdim=True)
+        return torch.where(same.any(1), same.to(torch.uint8).argmax(1), -1)
 
     def covariance_product(self, d: torch.Tensor) -> torch.Tensor:
         """J d for d (B, N), J = sum_mu (x_mu - p)(x_mu - p)^T with a zero diagonal, over the patterns in play.
@@ -250,20 +301,15 @@ class _Net(NamedTuple):
         S, n = self.total, self.n
         p = self.p if self.p is not None else S / n.clamp(min=1)
         B, N = d.shape
-        if self.lists is not None:   # one memory for all cues, cues last: each bag sums whole rows, in order
-            cols, starts, owners, firsts = self.lists
-            # d.T made contiguous with strides (B, 1): for one cue .contiguous() keeps strides (1, N), on which
-            # embedding_bag takes a path 18x slower
-            dt = d.T.clone(memory_format=torch.contiguous_format)
-            u = torch.nn.functional.embedding_bag(cols, dt, starts, mode="sum")                  # (M, B) = X d
-            h = torch.nn.functional.embedding_bag(owners, u, firsts, mode="sum").T.contiguous()  # (B, N)
+        u = self.forward(d)
+        if self.keep is not None:   # depressed stored patterns out (x 1 leaves a term as it was, bit for bit)
+            u.mul_(self.keep.T if self.lists is not None else self.keep)
+        if self.lists is not None:   # (M, B) -> (N, B): each bag sums whole rows, in order
+            h = torch.nn.functional.embedding_bag(self.lists[2], u, self.lists[3], mode="sum").T.contiguous()
         else:   # each cue its own memory, the additions in the same order: pattern by pattern, then neuron by neuron
             M, L = self.idx.shape[1:]
-            of = _owners(M, L, d.device)
             flat = self.idx.flatten(1)
-            de = torch.nn.functional.pad(d, (0, 1))                  # neuron N: the padding, always 0
-            u = de.new_zeros(B, M).scatter_add_(1, of.expand(B, -1), de.gather(1, flat))    # (B, M) = X d
-            h = torch.zeros_like(de).scatter_add_(1, flat, u.index_select(1, of))[:, :N]
+            h = d.new_zeros(B, N + 1).scatter_add_(1, flat, u.index_select(1, _owners(M, L, d.device)))[:, :N]
         if self.z.shape[1]:
             # the padding entries (neuron N) gather and scatter zeros at neuron N - 1: a running sum from 0 is never
             # -0, so adding a zero of either sign leaves it as it was
@@ -274,7 +320,7 @@ class _Net(NamedTuple):
             w = d.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), d.gather(1, flat) * real)   # (B, r) = Z d
             h.scatter_add_(1, flat, w.neg_().index_select(1, of) * real)
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
-        return h - S * ((p * d).sum(1, keepdim=True) + (1 - p if self.q is None else self.q) * d)
+        return h - S * (self.sheet_sum(p * d) + (1 - p if self.q is None else self.q) * d)
 
 
 class EpisodicMemory(nn.Module):
@@ -354,28 +400,47 @@ class EpisodicMemory(nn.Module):
         J.fill_diagonal_(0.0)
         return J
 
-    def _net(self, mem: slice, batch: int) -> _Net:
-        x = self.patterns[mem, :int(self.count[mem].max())].flatten(2)
-        total, count = x.sum(1), self.count[mem][:, None]
-        if self.config.zscore:
+    def _net(self, mem: slice, batch: int, compact: bool = False) -> tuple[_Net, torch.Tensor]:
+        """The network of memories `mem` for `batch` cues, and the code (1 or B, rows, cols) bool that every stored
+        episode of a memory holds on each row (all False where the episodes differ). compact=True: the network
+        spans only the cue rows and the rows where the episodes differ. A row that holds one code in every episode
+        settles at it in every recall (those neurons are predicted at their mean, 0 or 1, and give no evidence),
+        so a recall leaves it out and writes the code back: the agent's sheet has 5 such rows of 20."""
+        c = self.config
+        x = self.patterns[mem, :int(self.count[mem].max())]
+        total, count = x.sum(1), self.count[mem][:, None, None]
+        code = (total == count) & (count > 0)
+        differ = ((total > 0) & (total < count)).flatten(1).view(-1, c.rows, c.cols).any(-1).any(0)
+        rows = tuple(r for r in range(c.rows) if not compact or differ[r] or r in c.cue_rows)
+        x = x[:, :, list(rows)].flatten(2)
+        total, count = x.sum(1), count[:, :, 0]
+        held = torch.ones_like(total, dtype=torch.bool)
+        if c.zscore:
             # a neuron every stored episode uses or none does (p = 0 or 1, sigma = 0; and so for the rest of a recall,
             # depression only takes episodes out) is predicted at its mean whatever J says, and its deviation
             # counts 0 for the others: its synapses are left out of the products
-            x = x & ((total > 0) & (total < count))[:, None]
+            held = (total > 0) & (total < count)
+            x = x & held[:, None]
         lists = None
         if x.shape[0] == 1:
             def bags(m: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
                 size = m.sum(1)
                 return m.nonzero()[:, 1], size.cumsum(0) - size
             lists = (*bags(x[0]), *bags(x[0].T))
+        M = x.shape[1]
+        keep = (torch.arange(M, device=x.device) < count).float()      # patterns beyond a memory's count: none
         return _Net(active_neurons(x), total.float().expand(batch, -1).contiguous(),
                     count.float().expand(batch, 1).contiguous(),
-                    torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device), lists=lists)
+                    torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device),
+                    keep=keep.expand(batch, -1).contiguous(), lists=lists, sizes=x.sum(-1).float(), held=held,
+                    common=~held & (total == count) & (count > 0),
+                    layout=(rows, torch.tensor(rows, device=x.device), c.rows), row_k=self.row_k[list(rows)],
+                    cue_at=tuple(rows.index(r) for r in c.cue_rows)), code
 
     @torch.no_grad()
     def predict(self, state: torch.Tensor) -> torch.Tensor:
         """What the network predicts for every neuron given the others, for states (B, rows, cols) in [0, 1]."""
-        net = self._net(slice(None), self.batch)
+        net, _ = self._net(slice(None), self.batch)
         s = state.flatten(1).to(net.total)
         return net.predict(s - net.mean(), self.config.zscore).view(state.shape)
 
@@ -410,39 +475,55 @@ class EpisodicMemory(nn.Module):
             step = c.chunk_agents if shared else max(1, min(c.chunk_agents, c.chunk_elements // (M * c.rows * c.cols)))
             for lo in range(0, B, step):
                 sl = slice(lo, min(B, lo + step))
-                net = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start)
-                self._recall(cue[sl], net, episodes[sl], strength[sl], valid[sl])
+                net, code = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start, compact=True)
+                self._recall(cue[sl], net, code, episodes[sl], strength[sl], valid[sl])
         # strongest first, valid before invalid (stable: equal strengths keep their retrieval order)
         key = torch.where(valid, strength, torch.full_like(strength, -1.0))
         order = torch.sort(key, dim=1, descending=True, stable=True).indices
         episodes = episodes.gather(1, order[:, :, None, None].expand_as(episodes))
         return Recall(episodes, strength.gather(1, order), valid.gather(1, order), valid.any(1))
 
-    def _recall(self, cue, net, episodes, strength, valid):
-        """Retrieve, depress, retrieve again; writes into the (B, K, ...) outputs."""
+    def _recall(self, cue, net, code, episodes, strength, valid):
+        """Retrieve, depress, retrieve again; writes into the (B, K, ...) outputs (the rows the network leaves out
+        from `code`)."""
         c = self.config
         B, K = cue.shape[0], episodes.shape[1]
+        rows = list(net.layout[0])
+        got = torch.zeros(B, K, len(rows), c.cols, dtype=torch.bool, device=cue.device)
+        # depressed states that were no stored pattern (spurious fixed points), each cue's in order
         z = torch.full((B, K, sum(c.row_k)), net.total.shape[1], dtype=torch.long, device=cue.device)
-        total, n = net.total.clone(), net.n.clone()
+        spurious = torch.zeros(B, dtype=torch.long, device=cue.device)
+        total, n, keep = net.total.clone(), net.n.clone(), net.keep.clone()
         idx = torch.arange(B, device=cue.device)[n[:, 0] > 0]
         drive = cue.clone()               # the cue less the objects already retrieved (with cue_power != 1)
         for r in range(K):
             if idx.numel() == 0:
                 break
-            sub = net._replace(total=total, n=n, z=z[:, :r]).take(idx).ready()
+            zr = int(spurious[idx].max())
+            sub = net._replace(total=total, n=n, z=z[:, :zr], keep=keep).take(idx).ready()
             state, fixed = self._settle(cue[idx] if c.cue_power == 1 else drive[idx], sub)
-            obj = state[:, list(c.cue_rows)].flatten(1).float()
+            obj = state[:, list(net.cue_at)].flatten(1).float()
             s = (cue[idx] * obj).sum(1) / obj.sum(1).clamp(min=1.0)
             ok = fixed & (s >= c.min_strength)
             good = idx[ok]
-            episodes[good, r], strength[good, r], valid[good, r] = state[ok], s[ok], True
-            # depression: the retrieved state leaves the weights and the mean for the rest of this recall
+            got[good, r], strength[good, r], valid[good, r] = state[ok], s[ok], True
+            # depression: the retrieved state leaves the weights and the mean for the rest of this recall; a stored
+            # pattern by masking its term, any other state by subtracting its outer product
             kept = state[ok].flatten(1)
-            z[good, r] = active_neurons(kept, z.shape[2])   # a state of the k-WTA has at most sum(row_k) active
+            if good.numel() == 0:
+                break
+            m = sub.take(ok).stored(kept)
+            hit = m >= 0
+            keep[good[hit], m[hit]] = 0.0
+            odd = good[~hit]
+            z[odd, spurious[odd]] = active_neurons(kept[~hit], z.shape[2])   # at most sum(row_k) active
+            spurious[odd] += 1
             total[good] -= kept.float()
             n[good] -= 1
             drive[good] *= 1 - obj[ok]
             idx = good[n[good, 0] > 0]
+        episodes.copy_(code[:, None] & valid[:, :, None, None])
+        episodes[:, :, rows] = got
 
     def _settle(self, cue: torch.Tensor, net: _Net) -> tuple[torch.Tensor, torch.Tensor]:
         """Clamped pattern completion, then free running; returns (state (B, rows, cols) bool, fixed point (B,)).
@@ -455,9 +536,9 @@ class EpisodicMemory(nn.Module):
         at once instead of after `free_steps` (3 % of the settles of 16 recalls from 230 of the agent's episodes,
         8 % of their steps)."""
         c = self.config
-        B, R, C = cue.shape[0], c.rows, c.cols
+        B, R, C = cue.shape[0], len(net.layout[0]), c.cols
         s = net.p.view(B, R, C).clone()    # unknown rows sit at the mean: no evidence either way
-        rows = list(c.cue_rows)
+        rows = list(net.cue_at)
         if c.cue_power != 1:              # relative to the strongest neuron, then the power
             peak = cue.amax(1, keepdim=True)
             cue = torch.where(peak > 0, cue / peak.clamp_min(1e-12), cue) ** c.cue_power
@@ -522,4 +603,4 @@ class EpisodicMemory(nn.Module):
         (B, R, C)."""
         c = self.config
         a = net.predict((state - net.p.view_as(state)).flatten(1), c.zscore).view_as(state)
-        return _fire(a, self.row_k, c.threshold, finite)
+        return _fire(a, net.row_k, c.threshold, finite)

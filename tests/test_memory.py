@@ -126,18 +126,20 @@ def dense_predict(J, p, s):
     return p + sigma * (J @ d) / ((d * d).sum() - d * d).clamp(min=1e-3)
 
 
-def dense_recall(stored, q, cfg, K):
-    """The two-phase recall on the dense network; a retrieved episode is forgotten for the next retrieval."""
+def dense_recall(stored, q, cfg, K, in_order=False):
+    """The two-phase recall on the dense network; each retrieved state is then depressed: J and p as if it had been
+    stored with weight -1 (a retrieved stored episode is as if not stored). Strongest first, or in retrieval order."""
     row_k = torch.tensor(cfg.row_k)
-    left, found = list(stored), []
+    x = torch.stack([e.flatten().double() for e in stored])
+    sign = torch.ones(len(stored), dtype=torch.double)
+    found = []
     for _ in range(K):
-        if not left:
+        if sign.sum() < 0.5:
             break
-        x = torch.stack([e.flatten().double() for e in left])
-        p = x.mean(0)
+        p = (sign[:, None] * x).sum(0) / sign.sum()
         sigma = (p * (1 - p)).sqrt()
         y = torch.where(sigma > 1e-6, (x - p) / sigma.clamp_min(1e-6), torch.zeros_like(x))
-        J = y.T @ y
+        J = (y.T * sign) @ y
         J.fill_diagonal_(0)
         s = p.clone().view(R, C)
         s[OBJ] = q
@@ -154,8 +156,8 @@ def dense_recall(stored, q, cfg, K):
         if moved or strength < cfg.min_strength:
             break
         found.append((s.bool(), strength.item()))
-        left = [e for e in left if not torch.equal(e, s.bool())]
-    return sorted(found, key=lambda f: -f[1])
+        x, sign = torch.cat([x, s.flatten()[None]]), torch.cat([sign, -torch.ones(1, dtype=torch.double)])
+    return found if in_order else sorted(found, key=lambda f: -f[1])
 
 
 def test_factorised_network_equals_dense_network():
@@ -178,6 +180,30 @@ def test_factorised_network_equals_dense_network():
         for k, (e, strength) in enumerate(want):
             assert torch.equal(out.episodes[b, k], e)
             assert out.strength[b, k].item() == pytest.approx(strength, abs=1e-6)
+
+
+def test_a_spurious_fixed_point_is_depressed_as_its_outer_product():
+    """Agent-like episodes (shared rows, 3 rewards, 2 body states) and random graded cues: some cues settle into a
+    state no episode holds. A stored episode is depressed by masking its term, any other state by subtracting its
+    outer product; both as the dense network that stores each retrieved state with weight -1."""
+    g = torch.Generator().manual_seed(3)
+    stored = []
+    for _ in range(8):
+        obj = torch.randperm(C, generator=g)[:5].tolist()
+        reward = [(3, 30), (7, 40), (0, 25)][int(torch.randint(3, (1,), generator=g))]
+        stored.append(episode(obj, reward, body_end=[(8, 9), (10, 11)][int(torch.randint(2, (1,), generator=g))]))
+    mem = memory(*stored)
+    cues = torch.rand(20, C, generator=g) ** 3
+    out = mem.recall(cues, max_recalls=6)
+    spurious_then_more = 0
+    for b in range(len(cues)):
+        want = dense_recall(stored, cues[b].double(), mem.config, 6, in_order=True)
+        assert out.valid[b].sum().item() == len(want)
+        for k, (e, strength) in enumerate(sorted(want, key=lambda f: -f[1])):
+            assert torch.equal(out.episodes[b, k], e)
+            assert out.strength[b, k].item() == pytest.approx(strength, abs=1e-6)
+        spurious_then_more += any(not any(torch.equal(e, x) for x in stored) for e, _ in want[:-1])
+    assert spurious_then_more >= 1    # a spurious state was depressed and the recall went on
 
 
 def test_the_free_phase_starts_from_the_clamped_phase_last_prediction(monkeypatch):
