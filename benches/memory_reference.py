@@ -3,7 +3,8 @@ k-winners by a sort, every cue's constants recomputed at every step. A peer for 
 side by side in the same process: same stored episodes, same cues, its speed and its recalls beside ours.
 
 `DenseEpisodicMemory` is an `EpisodicMemory` whose recall runs the old code; storing, the buffers and the checks are
-the library's. Kept verbatim (apart from names), so what it returns is what the library returned then.
+the library's. Kept verbatim (apart from names, and the signatures `EpisodicMemory.recall` now calls, whose extra
+arguments it ignores: the old code spans the whole sheet), so what it returns is what the library returned then.
 """
 
 from __future__ import annotations
@@ -59,19 +60,19 @@ class _DenseNet(NamedTuple):
 class DenseEpisodicMemory(EpisodicMemory):
     """EpisodicMemory with the recall of commit 59ec298."""
 
-    def _net(self, mem: slice, batch: int) -> _DenseNet:
+    def _net(self, mem: slice, batch: int, compact: bool = False) -> tuple[_DenseNet, None]:
         x = self.patterns[mem, :int(self.count[mem].max())].flatten(2).float()
         total = x.sum(1).expand(batch, -1).contiguous()
         n = self.count[mem].to(x.dtype)[:, None].expand(batch, 1).contiguous()
-        return _DenseNet(x, total, n, x.new_zeros(batch, 0, x.shape[2]))
+        return _DenseNet(x, total, n, x.new_zeros(batch, 0, x.shape[2])), None
 
     @torch.no_grad()
     def predict(self, state: torch.Tensor) -> torch.Tensor:
-        net = self._net(slice(None), self.batch)
+        net, _ = self._net(slice(None), self.batch)
         s = state.flatten(1).to(net.x)
         return net.predict(s - net.mean(), self.config.zscore).view(state.shape)
 
-    def _recall(self, cue, net, episodes, strength, valid):
+    def _recall(self, cue, net, code, episodes, strength, valid):
         c = self.config
         B, K = cue.shape[0], episodes.shape[1]
         z = net.x.new_zeros(B, K, net.x.shape[2])
