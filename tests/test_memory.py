@@ -184,8 +184,9 @@ def test_factorised_network_equals_dense_network():
 
 def test_a_spurious_fixed_point_is_depressed_as_its_outer_product():
     """Agent-like episodes (shared rows, 3 rewards, 2 body states) and random graded cues: some cues settle into a
-    state no episode holds. A stored episode is depressed by masking its term, any other state by subtracting its
-    outer product; both as the dense network that stores each retrieved state with weight -1."""
+    state no episode holds, others alternate between two states (never fixed: the recall stops there, at once
+    instead of after free_steps). A stored episode is depressed by masking its term, any other state by subtracting
+    its outer product; both as the dense network that stores each retrieved state with weight -1."""
     g = torch.Generator().manual_seed(3)
     stored = []
     for _ in range(8):
