@@ -24,7 +24,8 @@ worst and median. Then the graded recall a prediction needs: for novel objects (
 recalled episode the stored object nearest to it (the highest hub match)? (The agent's sheet layout and the cue's
 power were chosen on sets of seeds 1000 and up; seeds 0-9 were not looked at while choosing them.)
 
-Run: .venv/bin/python benches/memory_capacity.py [--throughput]   (--throughput: that section alone, not recorded)
+Run: .venv/bin/python benches/memory_capacity.py [--throughput [--default-malloc]]   (--throughput: that section
+alone, not recorded; --default-malloc: without aesop_torch.malloc.keep_freed_memory)
 """
 
 from __future__ import annotations
@@ -360,6 +361,8 @@ def main():
 
 if __name__ == "__main__":
     if "--throughput" in sys.argv[1:]:
+        if "--default-malloc" not in sys.argv[1:]:   # --default-malloc: glibc as it comes, to see what it costs
+            keep_freed_memory()
         with recorded("memory_capacity", enabled=False), torch.no_grad():
             throughput_section()
     else:
