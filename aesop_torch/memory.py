@@ -260,17 +260,20 @@ class _Net(NamedTuple):
                              z_real=(flat < N).to(p.dtype))
 
     def predict(self, d: torch.Tensor, zscore: bool = True) -> torch.Tensor:
-        """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean, d~ = d / sigma, and
-        J~ = D^-1 J D^-1 (D = diag(sigma)) of the patterns in play; zscore=False: sigma = 1, the plain covariance
-        rule. A neuron that never varies (sigma = 0) is predicted at its mean and is no evidence for the others."""
+        """a = p + sigma J~ d~ / sum_{j != i} d~_j^2 for deviations d (B, N) from the mean (d is overwritten),
+        d~ = d / sigma, and J~ = D^-1 J D^-1 (D = diag(sigma)) of the patterns in play; zscore=False: sigma = 1, the
+        plain covariance rule. A neuron that never varies (sigma = 0) is predicted at its mean and is no evidence
+        for the others."""
         net = self if self.p is not None else self.ready()
-        if not zscore:
-            sq = d * d
-            return net.p + net.covariance_product(d) / (net.sheet_sum(sq) - sq).clamp(min=_EPS)
-        dz = d * net.inv
-        h = net.covariance_product(dz * net.inv)                 # J (D^-1 d~); times D^-1 and sigma below: 1
-        sq = dz * dz
-        return net.p + h * net.gain / (net.sheet_sum(sq) - sq).clamp(min=_EPS)
+        if zscore:
+            h = net.covariance_product(d.mul_(net.inv) * net.inv)  # J (D^-1 d~); times D^-1 and sigma below: 1
+            h.mul_(net.gain)
+        else:
+            h = net.covariance_product(d)
+        # in place where a tensor is not needed again (the same operations, the same bits): d is the caller's scratch
+        sq = d.mul_(d)
+        total = net.sheet_sum(sq)
+        return h.div_(sq.neg_().add_(total).clamp_(min=_EPS)).add_(net.p)
 
     def forward(self, d: torch.Tensor) -> torch.Tensor:
         """X d for d (B, N): (M, B) for one memory shared by all cues (embedding_bag's layout), else (B, M)."""
@@ -284,13 +287,17 @@ class _Net(NamedTuple):
         of = _owners(M, L, d.device).expand(B, -1)
         return de.new_zeros(B, M).scatter_add_(1, of, de.gather(1, self.idx.flatten(1)))
 
-    def stored(self, x: torch.Tensor) -> torch.Tensor:
-        """For states x (B, N) bool: the first stored pattern still in play that equals each, or -1 (B,) long."""
-        u = self.forward(x.to(self.total.dtype))
-        shared = u.T if self.lists is not None else u                 # (B, M): the shared neurons, counted
-        inside = (x & self.held).sum(1, keepdim=True)
-        same = (shared == self.sizes) & (self.sizes == inside) & (self.keep > 0) & \
-            ((x & ~self.held) == self.common).all(1, keepdim=True)
+    def stored(self, x: torch.Tensor, keep: torch.Tensor, who: torch.Tensor) -> torch.Tensor:
+        """For states x (B, N) bool of the cues `who` (B,), whose patterns in play are `keep` (B, M): the first stored
+        pattern in play that equals each state, or -1 (B,) long."""
+        mine = {f: t.index_select(0, who) for f, t in zip(self._fields, self) if f in _PER_MEMORY and t.shape[0] != 1}
+        net = self._replace(keep=keep, **mine)
+        u = net.forward(x.to(keep.dtype))
+        shared = u.T if net.lists is not None else u                  # (B, M): the shared neurons, counted
+        x8, held8 = x.view(torch.uint8), net.held.view(torch.uint8)   # bytes: torch's bool kernels are slow
+        inside = (x8 & held8).sum(1, keepdim=True)
+        rest = ((x8 ^ net.common.view(torch.uint8)) & (held8 ^ 1)).amax(1, keepdim=True) == 0   # the common code
+        same = (shared == net.sizes) & (net.sizes == inside) & (keep > 0) & rest
         return torch.where(same.any(1), same.to(torch.uint8).argmax(1), -1)
 
     def covariance_product(self, d: torch.Tensor) -> torch.Tensor:
@@ -320,7 +327,8 @@ class _Net(NamedTuple):
             w = d.new_zeros(B, r).scatter_add_(1, of.expand(B, -1), d.gather(1, flat) * real)   # (B, r) = Z d
             h.scatter_add_(1, flat, w.neg_().index_select(1, of) * real)
         # minus the mean's outer product n p p^T (S = n p), and the diagonal sum_mu (x_i - p_i)^2 = S_i (1 - p_i)
-        return h - S * (self.sheet_sum(p * d) + (1 - p if self.q is None else self.q) * d)
+        t = (1 - p if self.q is None else self.q) * d
+        return h.sub_(t.add_(self.sheet_sum(p * d)).mul_(S))
 
 
 class EpisodicMemory(nn.Module):
@@ -512,7 +520,7 @@ class EpisodicMemory(nn.Module):
             kept = state[ok].flatten(1)
             if good.numel() == 0:
                 break
-            m = sub.take(ok).stored(kept)
+            m = net.stored(kept, keep.index_select(0, good), good)
             hit = m >= 0
             keep[good[hit], m[hit]] = 0.0
             odd = good[~hit]
