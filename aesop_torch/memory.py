@@ -483,8 +483,9 @@ class EpisodicMemory(nn.Module):
             step = c.chunk_agents if shared else max(1, min(c.chunk_agents, c.chunk_elements // (M * c.rows * c.cols)))
             for lo in range(0, B, step):
                 sl = slice(lo, min(B, lo + step))
-                net, code = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start, compact=True)
-                self._recall(cue[sl], net, code, episodes[sl], strength[sl], valid[sl])
+                with torch.inference_mode():   # no autograd bookkeeping on the ~10^4 small operations: ~6 % faster
+                    net, code = self._net(slice(0, 1) if shared else sl, sl.stop - sl.start, compact=True)
+                    self._recall(cue[sl], net, code, episodes[sl], strength[sl], valid[sl])
         # strongest first, valid before invalid (stable: equal strengths keep their retrieval order)
         key = torch.where(valid, strength, torch.full_like(strength, -1.0))
         order = torch.sort(key, dim=1, descending=True, stable=True).indices
