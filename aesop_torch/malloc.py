@@ -3,8 +3,9 @@
 torch allocates every CPU tensor with malloc. By default glibc maps a large block afresh (mmap) and gives memory freed
 at the top of its heap back to the OS once more than twice the largest recent block is free; the next tensor then
 touches new pages, one page fault per 4 kB. The memory's recall makes and drops tensors of 100 kB to 1 MB at every
-step: 246 cues against 230 of the agent's episodes took ~20,000 page faults per recall, a fifth of its time
-(benches/memory_capacity.py). `keep_freed_memory()` raises both thresholds, so freed blocks are reused.
+step: 246 cues against 230 of the agent's episodes took ~20,000 page faults per recall, a fifth of its time, until
+the recall spanned only the rows that differ between episodes; since then ~5,000, a tenth (getrusage around one
+recall, 2026-12-02). `keep_freed_memory()` raises both thresholds, so freed blocks are reused.
 
 It is process-wide (the C library's malloc, for numpy and everything else too), so the library never calls it by
 itself: the runner (train/run.py) and the benchmarks do, before any work, and a user may. Where the C library has
