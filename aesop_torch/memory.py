@@ -232,9 +232,12 @@ class _Net(NamedTuple):
     def take(self, i: torch.Tensor) -> "_Net":
         if i.dtype == torch.bool:
             i = i.nonzero().flatten()
-        pick = {f: t.index_select(0, i) for f, t in zip(self._fields, self)
-                if f in _PER_CUE and t is not None or f in _PER_MEMORY and t.shape[0] != 1}
-        return self._replace(**pick)
+        return self._replace(**self._select(i, _PER_CUE | _PER_MEMORY))
+
+    def _select(self, i: torch.Tensor, fields: frozenset) -> dict:
+        """Rows i of the named fields that are per cue (a per-memory field of one memory for all cues stays)."""
+        return {f: t.index_select(0, i) for f, t in zip(self._fields, self)
+                if f in fields and t is not None and (f in _PER_CUE or t.shape[0] != 1)}
 
     def mean(self) -> torch.Tensor:
         return self.total / self.n.clamp(min=1)
@@ -272,8 +275,8 @@ class _Net(NamedTuple):
             h = net.covariance_product(d)
         # in place where a tensor is not needed again (the same operations, the same bits): d is the caller's scratch
         sq = d.mul_(d)
-        total = net.sheet_sum(sq)
-        return h.div_(sq.neg_().add_(total).clamp_(min=_EPS)).add_(net.p)
+        ssq = net.sheet_sum(sq)
+        return h.div_(sq.neg_().add_(ssq).clamp_(min=_EPS)).add_(net.p)
 
     def forward(self, d: torch.Tensor) -> torch.Tensor:
         """X d for d (B, N): (M, B) for one memory shared by all cues (embedding_bag's layout), else (B, M)."""
@@ -290,8 +293,7 @@ class _Net(NamedTuple):
     def stored(self, x: torch.Tensor, keep: torch.Tensor, who: torch.Tensor) -> torch.Tensor:
         """For states x (B, N) bool of the cues `who` (B,), whose patterns in play are `keep` (B, M): the first stored
         pattern in play that equals each state, or -1 (B,) long."""
-        mine = {f: t.index_select(0, who) for f, t in zip(self._fields, self) if f in _PER_MEMORY and t.shape[0] != 1}
-        net = self._replace(keep=keep, **mine)
+        net = self._replace(keep=keep, **self._select(who, _PER_MEMORY))
         u = net.forward(x.to(keep.dtype))
         shared = u.T if net.lists is not None else u                  # (B, M): the shared neurons, counted
         x8, held8 = x.view(torch.uint8), net.held.view(torch.uint8)   # bytes: torch's bool kernels are slow
@@ -417,17 +419,15 @@ class EpisodicMemory(nn.Module):
         c = self.config
         x = self.patterns[mem, :int(self.count[mem].max())]
         total, count = x.sum(1), self.count[mem][:, None, None]
-        code = (total == count) & (count > 0)
-        differ = ((total > 0) & (total < count)).flatten(1).view(-1, c.rows, c.cols).any(-1).any(0)
-        rows = tuple(r for r in range(c.rows) if not compact or differ[r] or r in c.cue_rows)
-        x = x[:, :, list(rows)].flatten(2)
-        total, count = x.sum(1), count[:, :, 0]
+        code, varies = (total == count) & (count > 0), (total > 0) & (total < count)     # (b, rows, cols)
+        rows = tuple(r for r in range(c.rows) if not compact or varies[:, r].any() or r in c.cue_rows)
+        x, total, count = x[:, :, list(rows)].flatten(2), total[:, list(rows)].flatten(1), count[:, :, 0]
         held = torch.ones_like(total, dtype=torch.bool)
         if c.zscore:
             # a neuron every stored episode uses or none does (p = 0 or 1, sigma = 0; and so for the rest of a recall,
             # depression only takes episodes out) is predicted at its mean whatever J says, and its deviation
             # counts 0 for the others: its synapses are left out of the products
-            held = (total > 0) & (total < count)
+            held = varies[:, list(rows)].flatten(1)
             x = x & held[:, None]
         lists = None
         if x.shape[0] == 1:
@@ -441,7 +441,7 @@ class EpisodicMemory(nn.Module):
                     count.float().expand(batch, 1).contiguous(),
                     torch.zeros(batch, 0, 0, dtype=torch.long, device=x.device),
                     keep=keep.expand(batch, -1).contiguous(), lists=lists, sizes=x.sum(-1).float(), held=held,
-                    common=~held & (total == count) & (count > 0),
+                    common=~held & code[:, list(rows)].flatten(1),
                     layout=(rows, torch.tensor(rows, device=x.device), c.rows), row_k=self.row_k[list(rows)],
                     cue_at=tuple(rows.index(r) for r in c.cue_rows)), code
 
@@ -518,9 +518,9 @@ class EpisodicMemory(nn.Module):
             got[good, r], strength[good, r], valid[good, r] = state[ok], s[ok], True
             # depression: the retrieved state leaves the weights and the mean for the rest of this recall; a stored
             # pattern by masking its term, any other state by subtracting its outer product
-            kept = state[ok].flatten(1)
             if good.numel() == 0:
                 break
+            kept = state[ok].flatten(1)
             m = net.stored(kept, keep.index_select(0, good), good)
             hit = m >= 0
             keep[good[hit], m[hit]] = 0.0
