@@ -34,6 +34,9 @@ class FakePhysics:
         self.workers = 1
         self.outcomes, self.probes = closed_form_outcomes(objects)
 
+    def start(self):
+        pass
+
     def submit(self, jobs):
         return map(self._answer, jobs)
 
@@ -53,11 +56,6 @@ class FakePhysics:
             if progress:
                 progress(job)
         return results
-
-    def call(self, fn, *args):
-        import train.physics
-        value = train.physics.by_name(fn, args) if isinstance(fn, str) else fn(*args)
-        return types.SimpleNamespace(get=lambda: value)
 
     def drops(self, names, record=False, progress=None):
         return self.run([("drop", n, record) for n in names], progress)

@@ -126,6 +126,58 @@ def test_a_novice_explores_and_water_accumulates_to_the_goal(explored):
     assert sum(rec["observed_cm3"]) == pytest.approx(sum(arch.values()), abs=0.1)
 
 
+def test_planner_sequences_by_hand():
+    from train.trials import planner_sequences
+    # the ball needs 237 cm^3. [30 g float (30), 400 g sinker (365)]: one drop, nothing to simulate ahead.
+    # [14 g float (14), box (180), 30 g float (30)]: 224 < 237, so the planner drops all three, the largest first
+    objs = parse_objects({**OBJECTS, "trials": [{"stand": ["blue_light_cylinder", "blue_heavy_cylinder"]},
+                                                {"stand": ["red_light_cylinder", "green_heavy_box",
+                                                           "blue_light_cylinder"]}]})
+    assert planner_sequences(objs) == [("green_heavy_box", "blue_light_cylinder", "red_light_cylinder")]
+
+
+class _ClosedFormPhysics:
+    """play_trials' physics in closed form (Archimedes adds up), every job it is handed kept in `jobs`."""
+
+    def __init__(self, outcomes: dict, need_cm3: float):
+        self.outcomes, self.need, self.jobs = outcomes, need_cm3, []
+
+    def submit(self, jobs):
+        from types import SimpleNamespace
+        self.jobs += jobs
+        drop = closed_form_drop(self.outcomes, self.need)
+        for _, names, _ in jobs:
+            yield [SimpleNamespace(observed_cm3=o["observed_cm3"], goal_reachable_before=o["goal_before"],
+                                   goal_reached_after=o["goal_after"], sank=o["sank"],
+                                   measurement=self.outcomes[n]["measurement"])
+                   for n, o in zip(names, drop([names[:k] for k in range(1, len(names) + 1)]))]
+
+    def run(self, jobs):
+        return list(self.submit(jobs))
+
+
+def test_a_sequence_simulated_ahead_is_taken_not_simulated_again(explored):
+    """The runner simulates the planner's sequences while its workers would idle: an agent that drops one (or a part
+    of one) takes its outcomes from there, and every record is as if it had been simulated when asked."""
+    from train.trials import planner_sequences, play_trials
+    exp, _, outcomes = explored
+    objs = parse_objects({**OBJECTS, "trials": [{"stand": ["red_light_cylinder", "green_heavy_box",
+                                                           "blue_light_cylinder"]}]})
+    need = reach_cm3(objs.jar)
+    first = {n: outcomes[n] for n in objs.trials[0]}   # first drops known (the exploration's), as in the runner
+    asked = _ClosedFormPhysics(outcomes, need)
+    plain = play_trials(exp, objs, asked, first_drops=first)
+    (whole,) = planner_sequences(objs)
+    assert plain[0][0]["chosen"] == list(whole)                        # the agent drops what the planner does
+    assert [j[1] for j in asked.jobs] == [whole[:2], whole]            # round by round, each from a fresh jar
+    ahead = _ClosedFormPhysics(outcomes, need)
+    done = next(ahead.submit([("trial", whole, None)]))
+    started = {whole: type("Started", (), {"get": lambda self: done})()}   # as Physics.ahead returns it
+    ahead.jobs.clear()
+    assert play_trials(exp, objs, ahead, first_drops=first, ahead=started) == plain
+    assert ahead.jobs == []                                            # its prefix and itself: taken, not simulated
+
+
 def test_choice_rule_by_hand():
     g = torch.Generator().manual_seed(0)
     # the gap is 200: 250 closes it alone (1 drop), 120 + 90 needs two; ties in drops go to the larger expectation

@@ -7,9 +7,9 @@ makes the physics embarrassingly parallel: the profile of a default run showed t
 independent simulations) taking 9 of its 12 s, so they run on every core at once, and so do the goal trials' drop
 sequences (each round's new ones at once). Each worker builds its world once.
 
-`submit` hands the workers jobs without waiting (forking them first if need be), so the runner opens its logs while
-they build their worlds and simulate; `call` runs any other function there (the runner draws its figure on a worker
-while the trials play). The pool lives until `close`.
+`start` forks the workers, which build their worlds while the runner builds its experiment; `submit` hands them jobs
+without waiting, so the runner opens its logs while they simulate; `ahead` starts one job whose result may be wanted
+later (a goal trial's drops the runner expects, simulated while the agents learn). The pool lives until `close`.
 
 On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
 pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them already
@@ -60,7 +60,8 @@ def _simulate(world, job: tuple):
 
 
 def by_name(target: str, args: tuple):
-    """target(*args) for target "module:function", its module imported here (see Physics.call)."""
+    """target(*args) for target "module:function", its module imported by the process that runs it (the runner's
+    drawer draws Figure 2 so, train/drawing.py: the runner never imports matplotlib)."""
     module, name = target.split(":")
     return getattr(importlib.import_module(module), name)(*args)
 
@@ -68,16 +69,6 @@ def by_name(target: str, args: tuple):
 def cores() -> int:
     """The cores this process may run on (its affinity mask, not the machine's count)."""
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
-
-
-class _Ready:
-    """A result computed in this process, with the interface of the pool's AsyncResult."""
-
-    def __init__(self, value):
-        self.value = value
-
-    def get(self):
-        return self.value
 
 
 class Physics:
@@ -128,17 +119,14 @@ class Physics:
                 progress(j)
         return results
 
-    def call(self, fn, *args):
-        """fn(*args) on a worker (in this process when there are none): an object whose get() waits for the
-        result. fn must be importable by name (it is pickled), or be given as its name, "module:function": then
-        only the process that runs it imports its module (the runner draws Figure 2 on a worker without importing
-        matplotlib itself: 0.45 s off its critical path)."""
-        if isinstance(fn, str):
-            fn, args = by_name, (fn, args)
+    def ahead(self, job: tuple):
+        """Start one job on a worker now, its result taken later with get() (the runner's guess at a goal trial's
+        drops, simulated while the workers would idle). Only for a pool: in this process it would cost the time it
+        saves."""
         if self.workers == 1:
-            return _Ready(fn(*args))
+            raise ValueError("Physics.ahead needs worker processes (workers > 1)")
         self.start()
-        return self._pool.apply_async(fn, args)
+        return self._pool.apply_async(_task, (job,))
 
     def drops(self, names: list[str], record: bool = False, progress=None) -> list:
         return self.run([("drop", n, record) for n in names], progress)

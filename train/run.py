@@ -186,10 +186,11 @@ def lock_out(out: Path) -> int:
     return fd
 
 
-def prepare(args, objects, n_orders: int):
+def prepare(args, objects, n_orders: int, physics=None):
     """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
     checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
-    checked."""
+    checked. physics (train.physics.Physics, optional): a new run forks its workers once everything is checked and
+    before the experiment is built, so they build their worlds while the maps train (0.3 s off the wall time)."""
     import torch
 
     from aesop_torch.malloc import keep_freed_memory
@@ -215,6 +216,8 @@ def prepare(args, objects, n_orders: int):
             raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
         # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
         orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
+        if physics is not None:
+            physics.start()
         return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
                           physics=args.physics), False, lock
     except BaseException:
@@ -256,11 +259,17 @@ def main(argv=None) -> int:
             print(f"train/run.py: {'resuming' if args.resume else 'starting'} {n_orders:,} order(s) of "
                   f"{len(objects.train)} object(s), physics {args.physics}, seed {args.seed} -> {args.out}",
                   flush=True)
-            exp, resumed, lock = prepare(args, objects, n_orders)
+            from train.drawing import Drawer
+            from train.physics import Physics
+            _OPEN["drawer"] = Drawer()   # before torch's import: it imports matplotlib on the idle core meanwhile
+            physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)   # forked in prepare
+            exp, resumed, lock = prepare(args, objects, n_orders, physics)
         except UsageError as e:
+            _close_quietly()
             print(f"train/run.py: error: {e}", file=sys.stderr)
             return 2
         except OSError as e:   # creating --out or its lock failed (a full disk, a race with another program)
+            _close_quietly()
             print(f"train/run.py: error: {_os_error(e)}", file=sys.stderr)
             return 1
         try:
@@ -269,6 +278,7 @@ def main(argv=None) -> int:
             os.close(lock)   # the kernel would at exit; a caller of main() in-process may start another run
     except KeyboardInterrupt:   # before the run started: nothing of value was written
         with _sigint_ignored():
+            _close_quietly()
             print(f"{_fresh_line()}train/run.py: interrupted before the run started", file=sys.stderr)
         return 130
 
@@ -322,17 +332,18 @@ def run(args, exp, objects, resumed: bool) -> int:
         _close_quietly()
 
 
-_OPEN: dict = {"physics": None, "logs": []}   # what the run has open, closed whatever way it ends
+_OPEN: dict = {"physics": None, "drawer": None, "logs": []}   # what the run has open, closed whatever way it ends
 
 
 def _close_quietly() -> None:
-    physics, logs = _OPEN["physics"], _OPEN["logs"]
-    _OPEN["physics"], _OPEN["logs"] = None, []
-    try:
-        if physics is not None:
-            physics.close()
-    except Exception:  # noqa: BLE001  the run is ending; its one line has been said
-        pass
+    physics, drawer, logs = _OPEN["physics"], _OPEN["drawer"], _OPEN["logs"]
+    _OPEN["physics"], _OPEN["drawer"], _OPEN["logs"] = None, None, []
+    for pool in (physics, drawer):
+        try:
+            if pool is not None:
+                pool.close()
+        except Exception:  # noqa: BLE001  the run is ending; its one line has been said
+            pass
     for log in logs:
         try:
             log.close()
@@ -348,6 +359,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from sim.objects import archimedes_cm3
     from train.checkpoint import save_atomic, write_text_atomic
     from train.experiment import draw_orders, outcome_record, plain_measurement
+    from train.drawing import Drawer
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
@@ -360,7 +372,8 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
 
     if not resumed:
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
-    physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)
+    physics = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui)   # main() made it
+    _OPEN["physics"] = physics
     specs = {o.name: o for o in objects.train + objects.probe}
     # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
     # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
@@ -374,6 +387,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     probe_drops = {}
     submitted = physics.submit(jobs)   # the workers start on them while the logs open
     from train.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
+    from train.trials import planner_sequences
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
                             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
@@ -405,6 +419,10 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             exp.probes[name] = {"measurement": plain_measurement(m),
                                 "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
         checkpoint()
+    # the goal trials' multi-drop sequences a planner would drop, simulated while the workers would idle (the
+    # agents learn here, Figure 2 and the trials follow): a well-taught agent drops them; others are simulated then
+    ahead = {s: physics.ahead(("trial", s, None)) for s in planner_sequences(objects)[:physics.workers]} \
+        if physics.workers > 1 else {}
     print(f"{'resuming' if resumed else 'running'}: {len(exp.orders)} order(s) x {exp.n_episodes} episodes, "
           f"physics {exp.physics}" + (" (each distinct object simulated once, its measured outcome reused by "
                                        "every order: the jar is reset between episodes)" if exp.physics == "cached"
@@ -430,8 +448,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
             if not per_episode:
                 bar.update(1, recs[0]["object"])
-    # Figure 2 shows the exploration: drawn and written on a worker while the population and the goal trials run
-    figure = physics.call("train.figures:save_figure2", exp.records, out / "figure2.png")
+    # Figure 2 shows the exploration: drawn and written by the drawer while the population and the goal trials run
+    drawer = _OPEN["drawer"] = _OPEN["drawer"] or Drawer()   # main() started it
+    figure = drawer.draw("train.figures:save_figure2", exp.records, out / "figure2.png")
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
     if len(orders) > len(exp.orders):
@@ -449,7 +468,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         with Step("goal trials", None, "drop", announce=False) as bar:
             # a trial's first drop of an object is the drop that measured it here (a fresh jar, the same noise seed)
             exp.trials = play_trials(exp, objects, physics, first_drops={**exp.outcomes, **probe_drops},
-                                     progress=lambda seq: bar.update(1, " > ".join(seq)))
+                                     progress=lambda seq: bar.update(1, " > ".join(seq)), ahead=ahead)
         for i, r in enumerate(exp.trials[0]):
             print(trial_line(i, r), flush=True)
         for b, log in enumerate(logs):
@@ -461,8 +480,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         log.writer.add_image("figure2", image, exp.n_episodes, dataformats="HWC")
         log.close()
     _OPEN["logs"] = []
-    physics.close()
-    _OPEN["physics"] = None
+    _close_quietly()   # the workers and the drawer: every result is in
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")

@@ -230,7 +230,24 @@ def outcome_dict(outcome) -> dict:
             "measurement": plain_measurement(outcome.measurement)}
 
 
-def play_trials(exp, objects, physics=None, first_drops: dict | None = None, progress=None) -> list[list[dict]]:
+def planner_sequences(objects) -> list[tuple]:
+    """Per trial whose planner needs several drops, in the objects file's order, the drops it makes: the largest
+    Archimedes displacement first, until the ball is reachable (sim.trial.fewest_drops). The runner simulates these
+    ahead, while its workers would idle (play_trials' `ahead`): a well-taught agent chooses them."""
+    from sim.objects import archimedes_cm3
+    need = reach_cm3(objects.jar)
+    out = []
+    for stand in objects.trials:
+        volume = {n: archimedes_cm3(objects.get(n), objects.jar) for n in stand}
+        best = sorted(stand, key=lambda n: -volume[n])
+        k = fewest_drops(list(volume.values()), need)
+        if k > 1:
+            out.append(tuple(best[:k]))
+    return list(dict.fromkeys(out))
+
+
+def play_trials(exp, objects, physics=None, first_drops: dict | None = None, progress=None,
+                ahead: dict | None = None) -> list[list[dict]]:
     """The runner's goal trials: every trial of the objects file with every order's agent, in the simulated world
     (each drop into the jar as earlier drops of the trial left it, the IK reach test after each). A candidate is
     lifted and weighed as in the exploration (its measurement from there, or from a drop here for an object only
@@ -241,7 +258,9 @@ def play_trials(exp, objects, physics=None, first_drops: dict | None = None, pro
     in this process, closed after), each from a fresh jar. first_drops: name -> outcome record of that object dropped
     into a fresh jar of this world with this seed (the runner's cached exploration drops, and the drops that measured
     its probes that wait on a stand): a trial's first drop of it is that same drop, bit for bit
-    (tests/test_trials.py), so it is not simulated again."""
+    (tests/test_trials.py), so it is not simulated again. ahead: sequence -> a result started earlier
+    (Physics.ahead, e.g. of planner_sequences): taken instead of simulating that sequence when an agent drops it.
+    Neither changes an outcome: each sequence starts from a fresh jar wherever and whenever it is simulated."""
     from sim.objects import archimedes_cm3
     from train.physics import Physics
 
@@ -261,11 +280,23 @@ def play_trials(exp, objects, physics=None, first_drops: dict | None = None, pro
         archimedes = {n: archimedes_cm3(objects.get(n), objects.jar) for stand in objects.trials for n in stand}
         agent = roomy_copy(exp.agent, sum(len(s) for s in objects.trials))
 
+        started = dict(ahead or {})
+        extending = lambda s: next((t for t in started if t[:len(s)] == s), None)   # a started sequence from s on
+
         def drop(sequences):
             new = [s for s in dict.fromkeys(sequences) if s not in cache]
-            for s, outs in zip(new, physics.run([("trial", s, None) for s in new])):
-                for k in range(1, len(s) + 1):
-                    cache.setdefault(s[:k], outcome_dict(outs[k - 1]))
+            fresh = [s for s in new if extending(s) is None]
+            submitted = physics.submit([("trial", s, None) for s in fresh])   # these start while we wait for the rest
+            for s in new:
+                if s in fresh:
+                    whole, outs = s, next(submitted)
+                elif s in cache:   # a prefix of a started sequence taken in this round
+                    continue
+                else:
+                    whole = extending(s)
+                    outs = started.pop(whole).get()
+                for k in range(1, len(whole) + 1):
+                    cache.setdefault(whole[:k], outcome_dict(outs[k - 1]))
             for s in sequences if progress is not None else ():
                 progress(s)
             return [cache[s] for s in sequences]
