@@ -156,6 +156,25 @@ def test_a_sphere_half_under_holds_half_its_volume(client):
     assert water.submerged_volume(ball) / CM ** 3 == pytest.approx(4 / 3 * math.pi * r ** 3 - 28 * math.pi / 3,
                                                                    abs=8 * math.pi * 0.19)
 
+def test_the_spheres_level_in_python_floats_is_numpys_bit_for_bit():
+    # the level with spheres alone is solved in Python floats (the ball floats there at every step): it must be the
+    # numpy solve's level exactly. Spheres dry, cut and under, 1 to 3 of them (3: a short sum's order shows), from
+    # levels above and below the answer; and np.clip's -0.0 kept
+    rng = np.random.default_rng(0)
+    water = Water(0, [0.0, 0.0], 0.0, 0.06, 0.6e-3, 1 / 240)    # no body added: no pybullet call
+    for n in (1, 2, 3):
+        for _ in range(200):
+            radii = rng.uniform(0.005, 0.03, n)
+            bottoms = rng.uniform(-0.01, 0.12, n)
+            water.level = float(rng.uniform(0.0, 0.15))
+            base = float(rng.uniform(0.02, 0.1))
+            fast = water._solve(base, [], bottoms.tolist(), radii.tolist())
+            assert fast == water._solve_points(base, [], bottoms, radii)
+    assert math.copysign(1, float(np.clip(np.array([-0.0]), 0.0, 1.0)[0])) == -1   # what _clip mirrors
+    from sim.water import _clip
+    assert math.copysign(1, _clip(-0.0, 0.0, 1.0)) == -1 and _clip(2.0, 0.0, 1.0) == 1.0 and _clip(-1, 0.0, 1) == 0
+
+
 @pytest.mark.parametrize("shape, size", [("cylinder", (0.05, 0.05, 0.08)), ("sphere", (0.06,) * 3),
                                          ("box", (0.04, 0.05, 0.06))])
 def test_sample_points_fill_the_shape(shape, size):
