@@ -500,8 +500,10 @@ def _flat(prefix: str, d: dict) -> dict:
 
 if __name__ == "__main__":
     code = main()
-    # everything is written and closed: spare the interpreter's last garbage collection, a walk over torch's objects
-    # that took ~0.7 s of the default run's exit (the memory goes back to the system with the process anyway)
-    import gc
-    gc.freeze()
-    sys.exit(code)
+    # everything is written, flushed and closed (checkpoints and summary.json fsynced and renamed, the logs closed,
+    # the worker processes ended): spare the interpreter's teardown, a walk over torch's objects and modules that
+    # took 0.25 s of the default run's wall time (0.03 s this way; the memory goes back to the system either way)
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(OSError):   # a reader that went away (| head) has what it wanted
+            stream.flush()
+    os._exit(code)
