@@ -1,9 +1,10 @@
 """Figure 2 drawn in a process of its own, started before the runner imports torch.
 
 The runner's first second is torch's import, on one core, while the other core idles. A process started then imports
-matplotlib there (~0.45 s) and waits, so Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal
-trials) instead of an import and a drawing after them. The process holds matplotlib only: no torch, no pybullet. It
-ignores Ctrl-C (the runner owns it and ends the process) and lives until `close`.
+`train.figures` there (matplotlib, and torch through `aesop_torch.rules`' names: ~1.6 s on that core) and waits, so
+Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal trials) instead of an import and a drawing after
+them. It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it and ends the process) and lives until
+`close`.
 """
 
 from __future__ import annotations

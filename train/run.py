@@ -261,7 +261,7 @@ def main(argv=None) -> int:
                   flush=True)
             from train.drawing import Drawer
             from train.physics import Physics
-            _OPEN["drawer"] = Drawer()   # before torch's import: it imports matplotlib on the idle core meanwhile
+            _OPEN["drawer"] = Drawer()   # before torch's import: it imports the figure's modules on the idle core
             physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)   # forked in prepare
             exp, resumed, lock = prepare(args, objects, n_orders, physics)
         except UsageError as e:
