@@ -9,11 +9,7 @@ them. It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it a
 
 from __future__ import annotations
 
-import multiprocessing as mp
-import signal
-import threading
-
-from train.physics import START_METHOD, by_name
+from train.physics import by_name, end_pool, quiet_pool
 
 
 def _init() -> None:
@@ -22,20 +18,12 @@ def _init() -> None:
 
 class Drawer:
     def __init__(self):
-        main = threading.current_thread() is threading.main_thread()   # only it may set handlers
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the process
-        try:
-            self._pool = mp.get_context(START_METHOD).Pool(1, initializer=_init)
-        finally:
-            if main:
-                signal.signal(signal.SIGINT, previous)
+        self._pool = quiet_pool(1, _init)
 
     def draw(self, target: str, *args):
         """target(*args) there, target given as "module:function": an object whose get() waits for the result."""
         return self._pool.apply_async(by_name, (target, args))
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.terminate()
-            self._pool.join()
-            self._pool = None
+        end_pool(self._pool)
+        self._pool = None

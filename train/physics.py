@@ -71,6 +71,25 @@ def cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
+def quiet_pool(processes: int, initializer, initargs: tuple = ()):
+    """A process pool started with SIGINT ignored, so its processes inherit that (Ctrl-C belongs to the runner)."""
+    main = threading.current_thread() is threading.main_thread()   # only it may set handlers
+    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    try:
+        return mp.get_context(START_METHOD).Pool(processes, initializer=initializer, initargs=initargs)
+    finally:
+        if main:
+            signal.signal(signal.SIGINT, previous)
+
+
+def end_pool(pool) -> None:
+    """End a quiet_pool (None: nothing). Every result the caller wants is in: its idle processes need no orderly
+    shutdown (0.4 s)."""
+    if pool is not None:
+        pool.terminate()
+        pool.join()
+
+
 class Physics:
     """Drops, inspections and trial sequences for the runner. workers=1 (or a GUI) simulates in this process, when
     the results are asked for."""
@@ -86,14 +105,7 @@ class Physics:
             return
         if START_METHOD == "fork":
             import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
-        ctx = mp.get_context(START_METHOD)
-        main = threading.current_thread() is threading.main_thread()   # only it may set handlers
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None   # inherited by the workers
-        try:
-            self._pool = ctx.Pool(self.workers, initializer=_init, initargs=(self.objects, self.seed))
-        finally:
-            if main:
-                signal.signal(signal.SIGINT, previous)
+        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed))
 
     def submit(self, jobs: list[tuple]):
         """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited
@@ -135,10 +147,8 @@ class Physics:
         return self.run([("inspect", n, None) for n in names])
 
     def close(self) -> None:
-        if self._pool is not None:
-            self._pool.terminate()   # every result is in: the idle workers need no orderly shutdown (0.4 s)
-            self._pool.join()
-            self._pool = None
+        end_pool(self._pool)
+        self._pool = None
         if self._world is not None:
             self._world.close()
             self._world = None
