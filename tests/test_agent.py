@@ -327,6 +327,52 @@ def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
         assert agent.expected_of(by_fate, p_sink).item() == pytest.approx(volume if sinks else mass, rel=1e-3)
 
 
+def test_an_extensive_property_is_read_as_a_proportion_weighted_by_how_well_the_mass_is_felt():
+    """Floaters in a liquid of density 1.25 (each displaces 0.8 cm^3 per g), their rewards read off with errors of
+    a few percent: 10 g -> 8.4, 20 g -> 16.0, 40 g -> 31.2 cm^3. The weight alone is a proportion (slope 1 in
+    logs), its ratio the mean of the log ratios, each weighted by m^2 / (m^2 + (1 g / 0.02)^2): by hand, read at a
+    200 g floater. A free slope through the three extrapolates their noise (143 cm^3 at 200 g)."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
+
+    def feat(mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(3.0), math.log(mass_g)])
+
+    floaters = [(10.0, 8.4), (20.0, 16.0), (40.0, 31.2)]
+    xk = torch.stack([feat(m) for m, _ in floaters])[None]
+    y = torch.tensor([[r for _, r in floaters]])
+    w = [m * m / (m * m + 50.0 ** 2) for m, _ in floaters]
+    ratio = math.exp(sum(wi * math.log(r / m) for wi, (m, r) in zip(w, floaters)) / sum(w))
+    got = agent.readout(feat(200.0)[None], xk, y, torch.zeros(1, 3, dtype=torch.long), torch.ones(1, 3))
+    assert got.item() == pytest.approx(200.0 * ratio, rel=1e-6)
+    assert abs(got.item() / 160.0 - 1.0) < 0.03
+
+
+def test_the_fate_is_read_where_the_two_fits_cross():
+    """Cubes: small floaters (they displace their mass) and small sinkers (their volume), recalled alike; probes
+    far outside both groups. An object sinks where floating would displace more than the room it fills, so it
+    sinks iff its mass exceeds its volume, whatever its size: an 8 cm cube of 300 g floats (300 cm^3), one of
+    900 g sinks (512 cm^3), a 2 cm cube of 20 g sinks (8 cm^3), a 5 cm one of 100 g floats (100 cm^3). A boundary
+    over size and mass apart, from these eight, is unsure of the two floaters (P(sinks) 0.47 and 0.41)."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
+    agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
+
+    def feat(size_cm, mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass_g)])
+
+    floaters = [(2.5, 6.0), (3.0, 12.0), (3.5, 30.0), (4.0, 25.0)]
+    sinkers = [(2.5, 40.0), (3.0, 100.0), (3.5, 90.0), (4.0, 200.0)]
+    xk = torch.stack([feat(*e) for e in floaters + sinkers])[None]
+    y = torch.tensor([[m for _, m in floaters] + [s ** 3 for s, _ in sinkers]])
+    fates = torch.tensor([[0] * 4 + [1] * 4])
+    for size, mass in ((8.0, 300.0), (8.0, 900.0), (2.0, 20.0), (5.0, 100.0)):
+        sinks = mass > size ** 3
+        by_fate, p_sink = agent.readout_by_fate(feat(size, mass)[None], xk, y, fates, torch.ones(1, 8))
+        assert by_fate[0].tolist() == pytest.approx([mass, size ** 3], rel=1e-6)
+        assert (p_sink.item() > 0.9) if sinks else (p_sink.item() < 0.1), (size, mass, p_sink.item())
+
+
 def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
     """Sinkers never compared yet (nothing dominant for them) while weight is dominant for floaters: the sinkers'
     fit tries every property not eliminated nor known irrelevant and keeps the one their rewards follow (size, here
