@@ -373,6 +373,26 @@ def test_the_fate_is_read_where_the_two_fits_cross():
         assert (p_sink.item() > 0.9) if sinks else (p_sink.item() < 0.1), (size, mass, p_sink.item())
 
 
+def test_a_dominant_property_does_not_hide_one_the_rewards_follow():
+    """Floaters, size dominant for them (a confounded comparison can do that) and weight neither dominant nor ruled
+    out: they displace their mass, and their volumes do not follow it (densities 0.2-0.9), so the readout reads the
+    mass (40 g -> 40 cm^3), not the volume. Once weight is eliminated for floaters it reads the volume."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 0, 2] = True                                    # floating: size
+
+    def feat(size_cm, mass_g):
+        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass_g)])
+
+    floaters = [(3.0, 20.0), (4.0, 12.8), (5.0, 60.0), (6.0, 100.0)]
+    xk = torch.stack([feat(*e) for e in floaters])[None]
+    y = torch.tensor([[m for _, m in floaters]])
+    read = agent.readout(feat(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
+    assert read.item() == pytest.approx(40.0, rel=1e-6)
+    agent.rules.eliminated[0, 0, 3] = True                                  # floating: weight eliminated
+    read = agent.readout(feat(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
+    assert abs(read.item() / 40.0 - 1.0) > 0.3
+
+
 def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
     """Sinkers never compared yet (nothing dominant for them) while weight is dominant for floaters: the sinkers'
     fit tries every property not eliminated nor known irrelevant and keeps the one their rewards follow (size, here
