@@ -465,12 +465,14 @@ class Agent(nn.Module):
         over the fits (tuning seeds 1000-1099)."""
         B, K = fates.shape
         dv, cv = as_volume(xk - x[:, None], feature_columns(self.rules.state != IRRELEVANT))
-        by_properties = self._will_sink(cv, dv, fates, weight)
         at = fitted.gather(2, pick[..., None, None].expand(B, 2, 1, K))[:, :, 0]  # (B, 2, K) each fit at each episode
         z = (at[:, 0] - at[:, 1]) - (pred[:, 0] - pred[:, 1])[:, None]            # (B, K), 0 at the present object
-        both = chosen.all(-1) & ~torch.isnan(pred).any(-1)
-        by_fits = self._will_sink(torch.ones(B, 1, dtype=torch.bool), torch.nan_to_num(z)[..., None], fates, weight)
-        return torch.where(both, by_fits, by_properties)
+        both = chosen.all(-1) & ~torch.isnan(pred).any(-1)                        # (B,) read over the fits
+        # one regression for all agents, each over its own columns: the fits' feature in column 0, or the properties
+        by_fits = torch.zeros_like(cv)
+        by_fits[:, 0] = True
+        d = torch.where(both[:, None, None], torch.nan_to_num(z)[..., None] * by_fits[:, None], dv)
+        return self._will_sink(torch.where(both[:, None], by_fits, cv), d, fates, weight)
 
     def _will_sink(self, cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: torch.Tensor,
                    steps: int = 12) -> torch.Tensor:
