@@ -329,16 +329,17 @@ def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
 
 def test_an_extensive_property_is_read_as_a_proportion_weighted_by_how_well_the_mass_is_felt():
     """Floaters in a liquid of density 1.25 (each displaces 0.8 cm^3 per g), their rewards read off with errors of
-    a few percent: 10 g -> 8.4, 20 g -> 16.0, 40 g -> 31.2 cm^3. The weight alone is a proportion (slope 1 in
-    logs), its ratio the mean of the log ratios, each weighted by m^2 / (m^2 + (1 g / 0.02)^2): by hand, read at a
-    200 g floater. A free slope through the three extrapolates their noise (143 cm^3 at 200 g)."""
+    a few percent: 10 g -> 8.2, 20 g -> 16.0, 40 g -> 31.4 cm^3. The weight alone is a proportion (slope 1 in
+    logs), its ratio the mean of the log ratios, each weighted by m^2 / (m^2 + (1 g / 0.02)^2) (all within Huber's
+    5 % of it): by hand, read at a 200 g floater. A free slope through the three extrapolates their noise (149 cm^3
+    at 200 g)."""
     agent = Agent(AgentConfig(seed=0))
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
 
     def feat(mass_g):
         return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(3.0), math.log(mass_g)])
 
-    floaters = [(10.0, 8.4), (20.0, 16.0), (40.0, 31.2)]
+    floaters = [(10.0, 8.2), (20.0, 16.0), (40.0, 31.4)]
     xk = torch.stack([feat(m) for m, _ in floaters])[None]
     y = torch.tensor([[r for _, r in floaters]])
     w = [m * m / (m * m + 50.0 ** 2) for m, _ in floaters]
@@ -346,6 +347,32 @@ def test_an_extensive_property_is_read_as_a_proportion_weighted_by_how_well_the_
     got = agent.readout(feat(200.0)[None], xk, y, torch.zeros(1, 3, dtype=torch.long), torch.ones(1, 3))
     assert got.item() == pytest.approx(200.0 * ratio, rel=1e-6)
     assert abs(got.item() / 160.0 - 1.0) < 0.03
+
+
+def test_an_episode_far_off_its_fit_counts_less():
+    """Six sinkers that displace their volume, one recalled with another object's reward (x 1.5: a mixed-up
+    recall). Least squares puts the ratio at exp(ln 1.5 / 6) = 1.07; Huber's reweighting (weight 0.05 / |residual|
+    beyond 0.05, twice), computed here by hand on the six log ratios, brings it within 1.1 %."""
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
+
+    def feat(size_cm):
+        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(1000.0)])
+
+    sizes = [3.0, 3.5, 4.0, 4.5, 5.0, 5.5]
+    xk = torch.stack([feat(a) for a in sizes])[None]
+    y = torch.tensor([[a ** 3 * (1.5 if i == 2 else 1.0) for i, a in enumerate(sizes)]])
+    got = agent.readout(feat(6.0)[None], xk, y, torch.ones(1, 6, dtype=torch.long), torch.ones(1, 6))
+    logs = [math.log(1.5) if i == 2 else 0.0 for i in range(6)]
+    centre = sum(logs) / 6
+    for _ in range(2):
+        w = [min(1.0, 0.05 / abs(v - centre)) for v in logs]
+        centre = sum(wi * v for wi, v in zip(w, logs)) / sum(w)
+    assert got.item() == pytest.approx(216.0 * math.exp(centre), rel=1e-6)
+    assert abs(got.item() / 216.0 - 1.0) < 0.011
+    agent.config.readout_huber = 10.0                                       # never reweighted: least squares
+    got = agent.readout(feat(6.0)[None], xk, y, torch.ones(1, 6, dtype=torch.long), torch.ones(1, 6))
+    assert got.item() == pytest.approx(216.0 * 1.5 ** (1 / 6), rel=1e-6)
 
 
 def test_the_fate_is_read_where_the_two_fits_cross():
