@@ -23,16 +23,16 @@ Choices the paper leaves open, made here:
   size^3, `as_volume`), so shape and size followed together are one slope, not two. An extensive property (size as
   the volume, weight: what adds up over an object's parts) enters alone as a proportion, twice the volume or the
   mass read as twice the effect, its ratio fitted; in a fit that reads the mass each episode weighs by how well its
-  mass was felt (a light object's is not). Of the properties
-  a context follows, the fit uses the one that predicts its recalled rewards best when each is left out (weighted
-  leave-one-out residuals), all of them only where too few episodes were recalled to fit any alone: the rules say
-  which properties may matter, the rewards which one does, and a fit on properties that moved together over a
-  handful of episodes extrapolates wildly off their line (the default set's three floaters, whose mass fell as their
-  volume grew, put a 120 g floater at 6,600 cm^3). Which fit applies, when both exist, comes from the recalled fates
-  too: a logistic boundary over how much more the object would displace floating than sinking by the two fits (an
-  object that would displace more than the room it fills sinks; where the fates sit on it is learned), or over the
-  properties not known irrelevant while a fate has too few episodes to choose a fit. Both fits and the probability
-  are kept (Anticipation.by_fate, p_sink): a chooser can weigh the two.
+  mass was felt (a light object's is not). Of the properties a context follows, the fit uses the one that predicts
+  its recalled rewards best when each is left out (weighted leave-one-out residuals), all of them only where too few
+  episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one does,
+  and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line (the
+  default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which
+  fit applies, when both exist, comes from the recalled fates too: a logistic boundary over how much more the
+  object would displace floating than sinking by the two fits (an object that would displace more than the room it
+  fills sinks; where the fates sit on it is learned), or over the properties not known irrelevant while a fate has
+  too few episodes to choose a fit. Both fits and the probability are kept (Anticipation.by_fate, p_sink): a
+  chooser can weigh the two.
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
@@ -436,7 +436,7 @@ class Agent(nn.Module):
         mass2 = (2.0 * xk[..., _WEIGHT]).exp()                                    # (B, K) felt mass^2, g^2
         felt = mass2 / (mass2 + (self.config.felt_mass_noise_g / self.config.readout_rel_precision) ** 2)
         ctx = torch.arange(2)[None, :, None]
-        in_fate = (weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0)))  # unseen fates count in both
+        in_fate = weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0))   # unseen fates count in both
         w = in_fate[:, :, None] * torch.where(reads[..., PROPERTIES.index("weight"), None], felt[:, None, None], 1.0)
         total = in_fate.sum(-1)                                                   # (B, 2)
         tot_c = w.sum(-1)                                                         # (B, 2, P + 1)
@@ -449,7 +449,7 @@ class Agent(nn.Module):
             beta = torch.linalg.solve(lhs, torch.einsum("bcnkf,bcnk,bcnk->bcnf", A, w, yc.expand(B, 2, -1, -1)))
             return lhs, beta, torch.einsum("bcnkf,bcnf->bcnk", A, beta) - yc     # residuals (B, 2, P + 1, K)
 
-        lhs, beta, res = solve(w, tot_c)
+        res = solve(w, tot_c)[2]
         w_plain = w
         for _ in range(2):   # Huber: an episode far off its fit counts less (readout_huber), refitted twice
             w = w_plain * (self.config.readout_huber / res.abs().clamp_min(1e-12)).clamp(max=1.0)
@@ -462,7 +462,7 @@ class Agent(nn.Module):
         # 4.7 % choosing by residual variance per degree of freedom, 4.5 % this way (before the mass weights)
         leverage = torch.einsum("bcnkf,bcnfg,bcnkg->bcnk", A, torch.linalg.inv(lhs), A) * w
         loo = (w * (res / (1.0 - leverage).clamp_min(1e-9)) ** 2).sum(-1) / tot_c.clamp_min(1e-12)
-        n = (w[:, :, 0] > 0).sum(-1, keepdim=True)                                # (B, 2, 1)
+        n = (in_fate > 0).sum(-1, keepdim=True)                                   # (B, 2, 1) episodes per fate
         dof = 1 + cols[..., 0, :].sum(-1)                                         # (B, 2, P + 1)
         ok = (n > dof) & torch.cat([follow, torch.zeros_like(follow[..., :1])], -1)
         score = torch.where(ok, loo, torch.full_like(loo, float("inf")))
