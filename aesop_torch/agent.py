@@ -123,11 +123,12 @@ class AgentConfig:
     # one, so at 230 objects half the hub is driven at >= 0.5 by some partial match; to the 8th, 0.5 clamps at 0.004
     # while the object's own assembly stays at 1 (exact recall of 230 generated objects from their cue: 0.4 % as
     # given, 24 % squared, 94 % to the 4th, 99 % to the 8th, as from the exact stored code; tuning seeds 1000-1009)
-    # Up to 16 recalls per cue: a long life's readout and rules need more than the 8 nearest (median novel-object
-    # error after 64 / 128 / 230 objects 5.0 / 3.4 / 3.4 % recalling 8, 3.7 / 2.6 / 2.3 % recalling 16; tuning seeds
-    # 1000-1011); a run that stores at most 16 episodes (the default one stores 8) is never cut
+    # No recall bound: a cue brings back every episode the network settles into (~70 of 160 stored after 230
+    # objects). A bound of 16 changed what a long life learns and predicts (tuning seeds 1000-1009, median
+    # novel-object error after 8 ... 230 objects: 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 %
+    # unbounded), so it was part of the model, not a bound for speed
     memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
-                                                                      cue_power=16.0, max_recalls=16))
+                                                                      cue_power=16.0, max_recalls=None))
     rules: RulesConfig = field(default_factory=RulesConfig)
     # the property maps are trained before the experiment on the infant's prior experience; 4000 samples cover
     # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
@@ -647,7 +648,11 @@ class Agent(nn.Module):
         unclear_c = outcome_unclear(stored, a.rewards, self.config.rules)
         strength = self.hub.strength[:, :len(self.properties)]
         fired, delta_p, skipped = [], [], []
-        for k in range(K):
+        # recalls come strongest first, the valid ones before the rest: past the most any agent compared with, a
+        # slot compares nothing and fires no rule (its comparisons are left out, not run; unbounded, K = the slots
+        # of a whole memory)
+        used = max(1, int(compared.sum(1).max()))
+        for k in range(used):
             # each comparison sees the pathways as they are in its context, after the comparisons before it
             gate = self.rules.context_strength()[torch.arange(B), context[:, k]]
             dp, unclear = self.delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
@@ -657,7 +662,10 @@ class Agent(nn.Module):
             delta_p.append(dp)
             skipped.append(compared[:, k] & ~use)
             fired.append(self.rules.apply(dp, delta_c[:, k] & use, use, strength=strength, context=context[:, k]))
-        fired, delta_p, skipped = torch.stack(fired, 1), torch.stack(delta_p, 1), torch.stack(skipped, 1)
+        rest = K - used
+        fired = torch.cat([torch.stack(fired, 1), fired[0].new_full((B, rest, fired[0].shape[1]), STATUS_QUO)], 1)
+        delta_p = torch.cat([torch.stack(delta_p, 1), delta_p[0].new_zeros(B, rest, delta_p[0].shape[1])], 1)
+        skipped = torch.cat([torch.stack(skipped, 1), skipped[0].new_zeros(B, rest)], 1)
         # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
         # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
         # tell, or a different object that happened to end the same

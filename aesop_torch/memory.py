@@ -26,7 +26,8 @@ The paper defers the network to Mohan et al. 2014 and Hopfield 2008 (not availab
   on the recalled object code. After each retrieval the retrieved state is transiently depressed (anti-Hebbian: its
   outer product and its share of the mean are taken out for the rest of this recall, i.e. a retrieved stored episode
   is as if not stored) and retrieval restarts from the same cue, until the strength drops below `min_strength`, the
-  state is not a fixed point, nothing is left, or `max_recalls` episodes were recalled. Results: strongest first.
+  state is not a fixed point, nothing is left, or `max_recalls` episodes were recalled (if bounded). Results:
+  strongest first.
 
 Nothing dense is stored: J is a sum of outer products, so J d = X^T (X d) - S (S . d) / n - diag(J) d is computed
 from the stored patterns X (B, max_episodes, 20, 50) bool, their sum S and count n. X d and X^T (X d) are gathers and
@@ -101,9 +102,11 @@ class MemoryConfig:
     # seeds 1000-1039 agreed in all 24 orders in 87.5 % at 0.05, 97.5 % at 0.001; seeds 1000-1099 at 0.001 lost
     # two more sets, whose sinkers cued each other at 0.0009 one way and 0.0016 the other.
     min_strength: float = 1e-6
-    # most episodes recalled for one cue, a bound for speed: a memory holding no more episodes is never cut (the
-    # agent sets 16: AgentConfig; a longer life recalls its 16 strongest).
-    max_recalls: int = 8
+    # most episodes recalled for one cue. None: the network's own number, every episode it settles into until a
+    # stopping condition above holds (never more than the memory can hold, max_episodes: each retrieval takes one
+    # state out). An int is a bound for speed, which cuts a recall that would bring back more (a memory holding no
+    # more episodes than it is never cut); the agent recalls unbounded (AgentConfig).
+    max_recalls: int | None = 8
     # cues recalled together (agents each with its own memory, or many cues against one): 256 keeps the
     # (256, 1000) working tensors in cache; of 16 to 1024, 256 was fastest for 984 cues against 230 of the agent's
     # episodes (1.14x 1024, 1.6x 32). And a bound on the agents' patterns handled at once (elements per chunk):
@@ -121,12 +124,12 @@ class MemoryConfig:
         if not self.cue_rows or len(set(self.cue_rows)) != len(self.cue_rows) or \
                 not all(0 <= r < self.rows for r in self.cue_rows):
             raise ValueError(f"MemoryConfig.cue_rows must be distinct rows in 0..{self.rows - 1}, got {self.cue_rows}")
-        if min(self.max_episodes, self.max_recalls, self.cue_steps, self.free_steps) < 1:
+        if min(self.max_episodes, self.max_recalls or 1, self.cue_steps, self.free_steps) < 1:
             raise ValueError("MemoryConfig.max_episodes, max_recalls, cue_steps and free_steps must be >= 1")
 
 
 class Recall(NamedTuple):
-    """What one cue brought back, strongest first; K = max_recalls."""
+    """What one cue brought back, strongest first; K = max_recalls (max_episodes where unbounded)."""
     episodes: torch.Tensor  # (B, K, rows, cols) bool, zeros where not valid
     strength: torch.Tensor  # (B, K) float in [0, 1]: mean cue activity on the recalled object code, 0 where not valid
     valid: torch.Tensor     # (B, K) bool
@@ -456,11 +459,13 @@ class EpisodicMemory(nn.Module):
     @torch.no_grad()
     def recall(self, cue: torch.Tensor, max_recalls: int | None = None) -> Recall:
         """Recall the episodes the graded object-hub cue (B, cols * len(cue_rows)) in [0, 1] points to, strongest
-        first (a cue of one row may also be given as (B, cols), of several as (B, len(cue_rows), cols)).
+        first (a cue of one row may also be given as (B, cols), of several as (B, len(cue_rows), cols)). max_recalls:
+        the config's by default; None there: no bound (K = max_episodes slots, the rest invalid).
 
         B equals the memory's batch, or the memory has batch 1 and serves B cues (many cues, one memory)."""
         c = self.config
         K = c.max_recalls if max_recalls is None else int(max_recalls)
+        K = c.max_episodes if K is None else K
         if K < 1:
             raise ValueError(f"max_recalls must be >= 1, got {K}")
         n_cue = len(c.cue_rows) * c.cols

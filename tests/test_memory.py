@@ -207,6 +207,34 @@ def test_a_spurious_fixed_point_is_depressed_as_its_outer_product():
     assert spurious_then_more >= 1    # a spurious state was depressed and the recall went on
 
 
+def test_unbounded_recall_is_the_networks_own_number_and_a_bound_cuts_only_beyond_it():
+    """max_recalls=None: every state the network settles into until a stop (the dense reference, run until it
+    stops by itself), in max_episodes slots. A bound at least the number the network brings back for a cue changes
+    nothing; a lower one cuts that cue's recall to its first retrievals."""
+    g = torch.Generator().manual_seed(5)
+    codes = torch.randperm(C, generator=g)[:40].view(8, 5)        # 8 objects, no neuron shared
+    stored = [episode(code.tolist(), (3, 30 + i)) for i, code in enumerate(codes)]
+    mem = memory(*stored, max_recalls=None, max_episodes=10)
+    # each cue touches 1 to 4 of the objects, each at its own graded activity
+    cues = torch.cat([cue(*[(stored[int(i)], 0.3 + 0.7 * float(torch.rand(1, generator=g)))
+                            for i in torch.randperm(8, generator=g)[:1 + b % 4]]) for b in range(12)])
+    free = mem.recall(cues)
+    assert free.valid.shape == (12, 10)
+    n = free.valid.sum(1)
+    for b in range(len(cues)):
+        want = dense_recall(stored, cues[b].double(), mem.config, 100)   # far more than can ever come back
+        assert n[b].item() == len(want)
+        assert all(torch.equal(free.episodes[b, k], e) for k, (e, _) in enumerate(want))
+    assert int(n.max()) >= 4 and int(n.min()) < int(n.max())
+    for bound in range(1, 9):
+        cut = mem.recall(cues, max_recalls=bound)
+        whole = n <= bound
+        assert torch.equal(cut.valid[whole], free.valid[whole, :bound])
+        assert torch.equal(cut.episodes[whole], free.episodes[whole, :bound])
+        assert torch.equal(cut.strength[whole], free.strength[whole, :bound])
+        assert (cut.valid[~whole].sum(1) == bound).all()
+
+
 def test_the_free_phase_starts_from_the_clamped_phase_last_prediction(monkeypatch):
     """Cue A's exact object row (binary, as stored): the first clamped step completes A, the second finds A fixed, and
     the free phase starts from that same state, so its first step is the second's prediction, not computed again:
