@@ -440,6 +440,29 @@ def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
     assert got.item() == pytest.approx(fill * 4.5 ** 3, rel=1e-3)
 
 
+def test_a_property_eliminated_for_floaters_is_still_followed_by_sinkers():
+    """Size eliminated for floaters (so known irrelevant) and colour dominant for sinkers by a confound: the sinkers'
+    fit still tries size, which sinkers alone have not eliminated, and keeps it, since their rewards follow it
+    exactly (they displace their volume); their colours and masses do not follow their volumes."""
+    from aesop_torch.rules import DOMINANT, IRRELEVANT
+    agent = Agent(AgentConfig(seed=0))
+    agent.rules.eliminated[0, 0, 2] = True                # floating: size
+    agent.rules.dominant[0, 1, 0] = True                  # sinking: colour
+    agent.rules.state[0, 0], agent.rules.state[0, 2] = DOMINANT, IRRELEVANT
+    fill = math.pi / 4
+
+    def feat(size_cm, mass_g, rgb):
+        return torch.tensor([*rgb, math.log(fill), math.log(size_cm), math.log(mass_g)])
+
+    sinkers = [(3.0, 200.0, (0.9, 0.1, 0.1)), (4.0, 150.0, (0.1, 0.9, 0.1)), (5.0, 400.0, (0.1, 0.1, 0.9)),
+               (3.5, 250.0, (0.5, 0.5, 0.1))]
+    xk = torch.stack([feat(*s) for s in sinkers])[None]
+    y = torch.tensor([[fill * s ** 3 for s, _, _ in sinkers]])
+    got = agent.readout(feat(4.5, 300.0, (0.9, 0.1, 0.1))[None], xk, y, torch.ones(1, 4, dtype=torch.long),
+                        torch.ones(1, 4))
+    assert got.item() == pytest.approx(fill * 4.5 ** 3, rel=1e-3)
+
+
 def test_the_agent_recalls_as_many_episodes_as_the_network_brings_back():
     """No recall bound in the agent: with 24 distinct objects stored, a cue brings back more than 16 of them (the
     network's own number, every episode the cue touches; 16 was the agent's bound before)."""
