@@ -18,21 +18,20 @@ Choices the paper leaves open, made here:
 - Prediction: a recall-strength-weighted readout that follows the properties the rules have not ruled out. Recalled
   episodes are split by what became of their objects (floated or sank); within each, the log reward is fitted as a
   linear function of the properties that context has not eliminated (one eliminated in the other context is still
-  followed), its dominant ones among them (weighted least squares, weights = recall strength, Huber-reweighted so
-  that an episode far off its fit counts less), and read at the present object's values. Size enters as the volume the object fills (fill x
-  size^3, `as_volume`), so shape and size followed together are one slope, not two. An extensive property (size as
-  the volume, weight: what adds up over an object's parts) enters alone as a proportion, twice the volume or the
-  mass read as twice the effect, its ratio fitted; in a fit that reads the mass each episode weighs by how well its
-  mass was felt (a light object's is not). Of the properties a context follows, the fit uses the one that predicts
-  its recalled rewards best when each is left out (weighted leave-one-out residuals), all of them only where too few
-  episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one does,
-  and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line (the
-  default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which
-  fit applies, when both exist, comes from the recalled fates too: a logistic boundary over how much more the
-  object would displace floating than sinking by the two fits (an object that would displace more than the room it
-  fills sinks; where the fates sit on it is learned), or over the properties not known irrelevant while a fate has
-  too few episodes to choose a fit. Both fits and the probability are kept (Anticipation.by_fate, p_sink): a
-  chooser can weigh the two.
+  followed), its dominant ones among them (weighted least squares, weights = recall strength, Huber-reweighted so that
+  an episode far off its fit counts less), and read at the present object's values. Size enters as the volume the
+  object fills (fill x size^3, `as_volume`), so shape and size followed together are one slope, not two. An extensive
+  property (size as the volume, weight: what adds up over an object's parts) enters alone as a proportion, twice the
+  volume or the mass read as twice the effect, its ratio fitted; in a fit that reads the mass each episode weighs by
+  how well its mass was felt (a light object's is not). Of the properties a context follows, the fit uses the one that
+  predicts its recalled rewards best when each is left out (weighted leave-one-out residuals), all of them only where
+  too few episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one
+  does, and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line (the
+  default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which fit
+  applies, when both exist, comes from the recalled fates too: a logistic boundary over how much more the object would
+  displace floating than sinking by the two fits (an object that would displace more than the room it fills sinks;
+  where the fates sit on it is learned), or over the properties not known irrelevant while a fate has too few episodes
+  to choose a fit. Both fits and the probability are kept (Anticipation.by_fate, p_sink): a chooser can weigh the two.
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
@@ -123,10 +122,10 @@ class AgentConfig:
     # one, so at 230 objects half the hub is driven at >= 0.5 by some partial match; to the 8th, 0.5 clamps at 0.004
     # while the object's own assembly stays at 1 (exact recall of 230 generated objects from their cue: 0.4 % as
     # given, 24 % squared, 94 % to the 4th, 99 % to the 8th, as from the exact stored code; tuning seeds 1000-1009)
-    # No recall bound: a cue brings back every episode the network settles into (~70 of 160 stored after 230
-    # objects). A bound of 16 changed what a long life learns and predicts (tuning seeds 1000-1009, median
-    # novel-object error after 8 ... 230 objects: 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 %
-    # unbounded), so it was part of the model, not a bound for speed
+    # No recall bound: a cue brings back every episode the network settles into (~40 of ~180 stored for a novel
+    # object after 230 objects, benches/learning_curve.py). A bound of 16 changed what a long life learns and
+    # predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects: 3.8 3.7 2.7 3.4 2.3 1.8 %
+    # bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not a bound for speed
     memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
                                                                       cue_power=16.0, max_recalls=None))
     rules: RulesConfig = field(default_factory=RulesConfig)

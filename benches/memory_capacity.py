@@ -295,9 +295,11 @@ def throughput_section():
         agent, _, life_cues, _, probe_cues = agent_life(SEED, 230)
         mask = agent._episode_neurons().to(life_cues.dtype)   # as Agent.anticipate_acts cues its memory
         cues = torch.cat([life_cues, probe_cues]) * mask
-        for k in (1, MemoryConfig().max_recalls, AgentConfig().memory.max_recalls):   # the library's, the agent's
+        # one, the library's default bound, 16 (the agent's bound until 2026-12-02) and the agent's: none
+        for k in (1, MemoryConfig().max_recalls, 16, AgentConfig().memory.max_recalls):
+            bound = "none (the network's own number, as the agent recalls)" if k is None else k
             throughput_line(f"230 of the agent's episodes (set {SEED}), its 230 objects and 16 probes as cues, "
-                            f"max_recalls={k}", agent.memory, copy_into(DenseEpisodicMemory, agent.memory), cues, k)
+                            f"max_recalls={bound}", agent.memory, copy_into(DenseEpisodicMemory, agent.memory), cues, k)
         agents = 4096
         x = torch.stack([agent_episodes(8, torch.Generator().manual_seed(b)) for b in range(64)]).repeat(64, 1, 1, 1)
         mem = EpisodicMemory(MemoryConfig(max_episodes=8), batch=agents)
