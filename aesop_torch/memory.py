@@ -124,7 +124,8 @@ class MemoryConfig:
         if not self.cue_rows or len(set(self.cue_rows)) != len(self.cue_rows) or \
                 not all(0 <= r < self.rows for r in self.cue_rows):
             raise ValueError(f"MemoryConfig.cue_rows must be distinct rows in 0..{self.rows - 1}, got {self.cue_rows}")
-        if min(self.max_episodes, self.max_recalls or 1, self.cue_steps, self.free_steps) < 1:
+        if min(self.max_episodes, 1 if self.max_recalls is None else self.max_recalls, self.cue_steps,
+               self.free_steps) < 1:
             raise ValueError("MemoryConfig.max_episodes, max_recalls, cue_steps and free_steps must be >= 1")
 
 

@@ -312,6 +312,10 @@ def test_bad_input_is_refused():
         EpisodicMemory(batch=2).recall(torch.zeros(3, C))
     with pytest.raises(ValueError, match="row_k"):
         MemoryConfig(row_k=(2,) * 19)
+    with pytest.raises(ValueError, match="max_recalls"):
+        MemoryConfig(max_recalls=0)                       # None is no bound; 0 is no recall at all: refused
+    with pytest.raises(ValueError, match="max_recalls"):
+        mem.recall(cue((A, 1.0)), max_recalls=0)
     assert mem.count.tolist() == [1]
 
 
