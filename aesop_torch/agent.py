@@ -649,7 +649,10 @@ class Agent(nn.Module):
         delta_c = contradiction(stored, a.rewards, self.config.rules) & compared
         unclear_c = outcome_unclear(stored, a.rewards, self.config.rules)
         strength = self.hub.strength[:, :len(self.properties)]
-        fired, delta_p, skipped = [], [], []
+        P = self.rules.state.shape[1]
+        fired = torch.full((B, K, P), STATUS_QUO, dtype=self.rules.state.dtype, device=compared.device)
+        delta_p = torch.zeros(B, K, P, dtype=torch.bool, device=compared.device)
+        skipped = torch.zeros_like(compared)
         # recalls come strongest first, the valid ones before the rest: past the most any agent compared with, a
         # slot compares nothing and fires no rule (its comparisons are left out, not run; unbounded, K = the slots
         # of a whole memory)
@@ -660,14 +663,9 @@ class Agent(nn.Module):
             dp, unclear = self.delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
                                               gate[:, None])
             use = compared[:, k] & ~cannot_tell(unclear[:, 0], delta_c[:, k], unclear_c[:, k])
-            dp = dp[:, 0] & use[:, None]
-            delta_p.append(dp)
-            skipped.append(compared[:, k] & ~use)
-            fired.append(self.rules.apply(dp, delta_c[:, k] & use, use, strength=strength, context=context[:, k]))
-        rest = K - used
-        fired = torch.cat([torch.stack(fired, 1), fired[0].new_full((B, rest, fired[0].shape[1]), STATUS_QUO)], 1)
-        delta_p = torch.cat([torch.stack(delta_p, 1), delta_p[0].new_zeros(B, rest, delta_p[0].shape[1])], 1)
-        skipped = torch.cat([torch.stack(skipped, 1), skipped[0].new_zeros(B, rest)], 1)
+            delta_p[:, k] = dp = dp[:, 0] & use[:, None]
+            skipped[:, k] = compared[:, k] & ~use
+            fired[:, k] = self.rules.apply(dp, delta_c[:, k] & use, use, strength=strength, context=context[:, k])
         # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
         # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
         # tell, or a different object that happened to end the same
