@@ -108,6 +108,11 @@ def test_readout_hits_archimedes_within_one_percent(hand_made, rgb, d, h, mass):
     assert hand_made.predict(m).item() == pytest.approx(truth, rel=0.01)
 
 
+def features(size_cm, mass_g, fill=1.0, rgb=(0.5, 0.5, 0.5)):
+    """One object's readout features by hand, in `Agent.features`' columns: rgb, log fill, log size, log mass."""
+    return torch.tensor([*rgb, math.log(fill), math.log(size_cm), math.log(mass_g)])
+
+
 def test_readout_follows_each_fates_law_and_the_boundary_learned_from_memory():
     """Features by hand (rgb, log fill, log size, log mass): floaters displace their mass, sinkers their volume
     (fill x size^3). The fits follow weight for floaters and size for sinkers; which fit applies comes from a
@@ -115,10 +120,8 @@ def test_readout_follows_each_fates_law_and_the_boundary_learned_from_memory():
     agent = Agent(AgentConfig(seed=0))
     agent.rules.dominant[0, 0, 3] = True              # floating: weight
     agent.rules.dominant[0, 1, 2] = True              # sinking: size
-    fill = math.log(math.pi / 4)
-
     def feat(size_cm, mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, fill, math.log(size_cm), math.log(mass_g)])
+        return features(size_cm, mass_g, fill=math.pi / 4)
 
     # a large heavy floater and a small light sinker: weight alone does not tell them apart, weight for its size does
     episodes = [(4.0, 10.0, 0), (4.5, 20.0, 0), (5.0, 40.0, 0), (6.5, 150.0, 0),
@@ -144,7 +147,7 @@ def test_sinkers_of_another_shape_and_size_are_read_by_their_volume():
     agent.rules.dominant[0, 1, 1] = agent.rules.dominant[0, 1, 2] = True    # sinking: shape and size
 
     def feat(fill, size_cm):
-        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(1000.0)])
+        return features(size_cm, 1000.0, fill)
 
     sinkers = [(1.0, 4.0), (math.pi / 6, 6.0)]
     xk = torch.stack([feat(f, s) for f, s in sinkers])[None]
@@ -164,14 +167,11 @@ def test_the_fit_follows_the_one_property_that_explains_the_rewards():
     agent = Agent(AgentConfig(seed=0))
     agent.rules.dominant[0, 0, 2] = agent.rules.dominant[0, 0, 3] = True    # floating: size and weight
 
-    def feat(size_cm, mass):
-        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass)])
-
     floaters = [(6.0, 10.0), (7.0, 40.0), (8.0, 20.0)]
-    xk = torch.stack([feat(*f) for f in floaters])[None]
+    xk = torch.stack([features(*f) for f in floaters])[None]
     y = torch.tensor([[m for _, m in floaters]])
     fates = torch.zeros(1, 3, dtype=torch.long)
-    query = feat(11.0, 120.0)[None]
+    query = features(11.0, 120.0)[None]
     assert agent.readout(query, xk, y, fates, torch.ones(1, 3)).item() == pytest.approx(120.0, rel=1e-3)
 
 
@@ -310,7 +310,7 @@ def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
     ball = math.pi / 6
 
     def feat(fill, size_cm, mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(mass_g)])
+        return features(size_cm, mass_g, fill)
 
     episodes = [(1.0, 3.0, 15.0), (1.0, 3.0, 50.0), (1.0, 4.0, 40.0), (1.0, 4.0, 100.0),
                 (ball, 6.0, 70.0), (ball, 6.0, 200.0), (ball, 7.0, 120.0), (ball, 7.0, 300.0)]
@@ -336,7 +336,7 @@ def test_an_extensive_property_is_read_as_a_proportion_weighted_by_how_well_the_
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
 
     def feat(mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(3.0), math.log(mass_g)])
+        return features(3.0, mass_g)
 
     floaters = [(10.0, 8.2), (20.0, 16.0), (40.0, 31.4)]
     xk = torch.stack([feat(m) for m, _ in floaters])[None]
@@ -356,7 +356,7 @@ def test_an_episode_far_off_its_fit_counts_less():
     agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
 
     def feat(size_cm):
-        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(1000.0)])
+        return features(size_cm, 1000.0)
 
     sizes = [3.0, 3.5, 4.0, 4.5, 5.0, 5.5]
     xk = torch.stack([feat(a) for a in sizes])[None]
@@ -384,17 +384,14 @@ def test_the_fate_is_read_where_the_two_fits_cross():
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
     agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
 
-    def feat(size_cm, mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass_g)])
-
     floaters = [(2.5, 6.0), (3.0, 12.0), (3.5, 30.0), (4.0, 25.0)]
     sinkers = [(2.5, 40.0), (3.0, 100.0), (3.5, 90.0), (4.0, 200.0)]
-    xk = torch.stack([feat(*e) for e in floaters + sinkers])[None]
+    xk = torch.stack([features(*e) for e in floaters + sinkers])[None]
     y = torch.tensor([[m for _, m in floaters] + [s ** 3 for s, _ in sinkers]])
     fates = torch.tensor([[0] * 4 + [1] * 4])
     for size, mass in ((8.0, 300.0), (8.0, 900.0), (2.0, 20.0), (5.0, 100.0)):
         sinks = mass > size ** 3
-        by_fate, p_sink = agent.readout_by_fate(feat(size, mass)[None], xk, y, fates, torch.ones(1, 8))
+        by_fate, p_sink = agent.readout_by_fate(features(size, mass)[None], xk, y, fates, torch.ones(1, 8))
         assert by_fate[0].tolist() == pytest.approx([mass, size ** 3], rel=1e-6)
         assert (p_sink.item() > 0.9) if sinks else (p_sink.item() < 0.1), (size, mass, p_sink.item())
 
@@ -406,16 +403,13 @@ def test_a_dominant_property_does_not_hide_one_the_rewards_follow():
     agent = Agent(AgentConfig(seed=0))
     agent.rules.dominant[0, 0, 2] = True                                    # floating: size
 
-    def feat(size_cm, mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, 0.0, math.log(size_cm), math.log(mass_g)])
-
     floaters = [(3.0, 20.0), (4.0, 12.8), (5.0, 60.0), (6.0, 100.0)]
-    xk = torch.stack([feat(*e) for e in floaters])[None]
+    xk = torch.stack([features(*e) for e in floaters])[None]
     y = torch.tensor([[m for _, m in floaters]])
-    read = agent.readout(feat(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
+    read = agent.readout(features(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
     assert read.item() == pytest.approx(40.0, rel=1e-6)
     agent.rules.eliminated[0, 0, 3] = True                                  # floating: weight eliminated
-    read = agent.readout(feat(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
+    read = agent.readout(features(5.5, 40.0)[None], xk, y, torch.zeros(1, 4, dtype=torch.long), torch.ones(1, 4))
     assert abs(read.item() / 40.0 - 1.0) > 0.3
 
 
@@ -431,7 +425,7 @@ def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
     fill = math.pi / 4
 
     def feat(size_cm, mass_g):
-        return torch.tensor([0.5, 0.5, 0.5, math.log(fill), math.log(size_cm), math.log(mass_g)])
+        return features(size_cm, mass_g, fill)
 
     sinkers = [(3.0, 200.0), (4.0, 150.0), (5.0, 400.0)]
     xk = torch.stack([feat(*s) for s in sinkers])[None]
@@ -452,7 +446,7 @@ def test_a_property_eliminated_for_floaters_is_still_followed_by_sinkers():
     fill = math.pi / 4
 
     def feat(size_cm, mass_g, rgb):
-        return torch.tensor([*rgb, math.log(fill), math.log(size_cm), math.log(mass_g)])
+        return features(size_cm, mass_g, fill, rgb)
 
     sinkers = [(3.0, 200.0, (0.9, 0.1, 0.1)), (4.0, 150.0, (0.1, 0.9, 0.1)), (5.0, 400.0, (0.1, 0.1, 0.9)),
                (3.5, 250.0, (0.5, 0.5, 0.1))]
