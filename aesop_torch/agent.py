@@ -158,8 +158,8 @@ class AgentConfig:
     # after 8 / 24 episodes 3.6 / 2.8 % and 3.6 / 2.7 % (1000-1099 / 1000-1029)
     readout_huber: float = 0.05
     # a pathway at or below this strength retro-activates nothing (the paper: eliminated, "they no longer will
-    # retro-activate each other"): the rules' eliminated strength (0.05) is below it, an undecided pathway after
-    # 14 Uncertainty firings (0.85^14 = 0.10) still above.
+    # retro-activate each other"): the rules' eliminated strength (0.05) is below it, an undecided pathway (never
+    # below RulesConfig.uncertain_floor, 0.5) above.
     retro_floor: float = 0.1
     # ridge of the readout's fit, relative to its total weight: enough to make a fit on one episode (or on episodes
     # that share a value) flat instead of singular, too little to bend a fit on values that differ.

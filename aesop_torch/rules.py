@@ -70,6 +70,12 @@ class RulesConfig:
     dominant_strength: float = 3.0
     # "marginally reduce": each Uncertainty firing keeps 85 % of an undecided pathway.
     uncertain_decay: float = 0.85
+    # ... but never below this: Uncertainty cannot tell whether the property matters ("unless further experience is
+    # gained"), so its pathway keeps retro-activating (above AgentConfig.retro_floor, unlike an eliminated one) and
+    # a later change in it is still seen. Each recalled episode is one comparison, so a long life fires it hundreds
+    # of times (108 times for shape in 26 episodes on tuning seed 1055; 0.85^108 = 2e-8, and then a size change
+    # that shape's change offset, larger but hollower, eliminated size for sinkers). 0.25 does as well (tuning seeds).
+    uncertain_floor: float = 0.5
     # certainty of "likely irrelevant" after n Uncertainty firings: 1 - (1 - step)^n, i.e. 0.3, 0.51, 0.66, ...
     # grows with every firing and never reaches 1 on its own.
     certainty_step: float = 0.3
@@ -238,9 +244,9 @@ class CausalRules(nn.Module):
 
     def strength_from_knowledge(self, dtype=torch.float32) -> torch.Tensor:
         """(B, P) hub pathway strengths: dominant strengthened, irrelevant drastically reduced, likely irrelevant
-        marginally reduced per Uncertainty firing."""
+        marginally reduced per Uncertainty firing (down to `RulesConfig.uncertain_floor`)."""
         c = self.config
-        s = c.uncertain_decay ** self.uncertain_count.to(dtype)
+        s = (c.uncertain_decay ** self.uncertain_count.to(dtype)).clamp_min(c.uncertain_floor)
         s = torch.where(self.state == DOMINANT, torch.full_like(s, c.dominant_strength), s)
         return torch.where(self.state == IRRELEVANT, torch.full_like(s, c.eliminated_strength), s)
 

@@ -85,6 +85,21 @@ def test_certainty_grows_with_uncertainty_but_never_reaches_one():
     assert rules.state[0, SH] == LIKELY_IRRELEVANT and max(values) < 1.0  # never decided by Uncertainty alone
 
 
+def test_uncertainty_reduces_a_pathway_marginally_and_never_silences_it():
+    """0.85^n per firing down to the floor (0.5 by default): 0.85, 0.7225, 0.614, 0.522, then 0.5 for ever, far
+    above the strength below which a pathway retro-activates nothing (AgentConfig.retro_floor 0.1), where an
+    eliminated one sits (0.05)."""
+    rules, strength = CausalRules(), torch.ones(1, 4)
+    seen = []
+    for _ in range(120):
+        fire(rules, dp(W), True, strength)
+        seen.append(float(strength[0, SH]))
+    assert seen[:5] == pytest.approx([0.85, 0.7225, 0.614125, 0.52200625, 0.5])
+    assert seen[-1] == 0.5 and rules.state[0, SH] == LIKELY_IRRELEVANT
+    fire(rules, dp(SH), False, strength)
+    assert float(strength[0, SH]) == pytest.approx(0.05)
+
+
 def test_ambiguous_growth_is_overturned_by_clean_elimination_in_either_order():
     # colour and weight change together and the outcome changes; elsewhere colour alone changes without effect
     a, b = CausalRules(), CausalRules()
