@@ -29,7 +29,8 @@ for the withdrawal of a context's eliminations below):
   leave the fewest held comparisons unexplained (a comparison whose change set holds a cause, yet the outcome
   held), then the smallest: colour changes in every pair of random objects, and only the pairs where it changed
   and the outcome held tell it from weight. In the mixed context, a property eliminated for floaters and for
-  sinkers alike cannot explain a floater against a sinker.
+  sinkers alike cannot explain a floater against a sinker, and of its minimal explanations it keeps those with the
+  fewest properties dominant for neither floaters nor sinkers (the two differ by what matters for one of them).
   A clean Growth forces its property in; a confound is resolved by the rest of the evidence (colour changed
   together with weight is explained by weight once weight explains the other contradictions), and a confound
   nothing resolves makes each candidate dominant.
@@ -227,6 +228,13 @@ class CausalRules(nn.Module):
         against = (held[:, :, None, :] & self._hits).sum(-1)                          # (B, C, n)
         key = torch.where(explains, against * (P + 1) + self._size, torch.full_like(against, n * (P + 1)))
         minimal = explains & (key == key.min(-1, keepdim=True).values) & eff.any(-1, keepdim=True)
+        # a floater against a sinker differs by what matters for floaters or for sinkers: of the mixed context's
+        # minimal explanations, those with the fewest properties dominant in neither fate
+        pure = (minimal[:, :MIXED, :, None] & self._bits).any(2).any(1)                 # (B, P)
+        outside = (self._bits & ~pure[:, None]).sum(-1)                                  # (B, n)
+        mixed = minimal[:, MIXED]
+        fewest = torch.where(mixed, outside, torch.full_like(outside, P + 1)).min(-1, keepdim=True).values
+        minimal[:, MIXED] = mixed & (outside == fewest)
         self.dominant.copy_((minimal[..., None] & self._bits).any(2))
         state = torch.full_like(self.state, UNKNOWN)
         state[self.uncertain_count > 0] = LIKELY_IRRELEVANT

@@ -167,6 +167,30 @@ def test_an_elimination_elsewhere_is_presumed_unless_the_evidence_needs_the_prop
     assert other.dominant[0, SINKING].tolist() == [True, False, False, False]
 
 
+def test_a_floater_against_a_sinker_is_explained_by_what_matters_for_either():
+    """Colour, shape and size eliminated for floaters, weight grown for floaters and size for sinkers. A floater
+    against a sinker changed colour, shape and size (outcome moved), another only weight (moved): the first needs a
+    property presumed irrelevant, so the mixed context explains on its own evidence, and {colour, weight},
+    {shape, weight} and {size, weight} explain both equally well. Of these {size, weight} alone uses only what
+    matters for a floater or a sinker: colour and shape stay irrelevant (both were dominant before, 2026-12-02)."""
+    rules = CausalRules()
+    for p in (C, SH, SI):
+        fire(rules, dp(p), False, context=FLOATING)
+    fire(rules, dp(W), True, context=FLOATING)
+    fire(rules, dp(SI), True, context=SINKING)
+    fire(rules, dp(C, SH, SI), True, context=MIXED)
+    fire(rules, dp(W), True, context=MIXED)
+    assert rules.dominant[0, MIXED].tolist() == [False, False, True, True]
+    assert rules.state[0].tolist() == [IRRELEVANT, IRRELEVANT, DOMINANT, DOMINANT]
+    # with nothing dominant for floaters or sinkers, the mixed context keeps every minimal explanation
+    bare = CausalRules()
+    for p in (C, SH, SI):
+        fire(bare, dp(p), False, context=FLOATING)
+    fire(bare, dp(C, SH, SI), True, context=MIXED)
+    fire(bare, dp(W), True, context=MIXED)
+    assert bare.dominant[0, MIXED].tolist() == [True, True, True, True]
+
+
 def test_several_changes_that_hold_eliminate_nothing():
     # a larger but hollower object can displace the same: no verdict on either
     rules = CausalRules()
