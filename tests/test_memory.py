@@ -128,26 +128,29 @@ def dense_predict(J, p, s):
 
 def dense_recall(stored, q, cfg, K, in_order=False):
     """The two-phase recall on the dense network; each retrieved state is then depressed: J and p as if it had been
-    stored with weight -1 (a retrieved stored episode is as if not stored). Strongest first, or in retrieval order."""
+    stored with weight -1 (a retrieved stored episode is as if not stored). With cfg.cue_power != 1 the sheet is
+    clamped to the drive, (drive / its peak)^power, and each retrieved object's neurons leave the drive; the first
+    retrieval that settles nowhere ends the recall (misses = 0). Strongest first, or in retrieval order."""
     row_k = torch.tensor(cfg.row_k)
     x = torch.stack([e.flatten().double() for e in stored])
     sign = torch.ones(len(stored), dtype=torch.double)
-    found = []
+    found, drive = [], q.clone()
     for _ in range(K):
         if sign.sum() < 0.5:
             break
+        clamp_to = q if cfg.cue_power == 1 else (drive / drive.max() if drive.max() > 0 else drive) ** cfg.cue_power
         p = (sign[:, None] * x).sum(0) / sign.sum()
         sigma = (p * (1 - p)).sqrt()
         y = torch.where(sigma > 1e-6, (x - p) / sigma.clamp_min(1e-6), torch.zeros_like(x))
         J = (y.T * sign) @ y
         J.fill_diagonal_(0)
         s = p.clone().view(R, C)
-        s[OBJ] = q
+        s[OBJ] = clamp_to
         for clamp, steps in ((True, cfg.cue_steps), (False, cfg.free_steps)):
             for _ in range(steps):
                 new = k_winners(dense_predict(J, p, s.flatten()).view(R, C), row_k, cfg.threshold).double()
                 if clamp:
-                    new[OBJ] = q
+                    new[OBJ] = clamp_to
                 moved = not torch.equal(new, s)
                 s = new
                 if not moved:
@@ -156,6 +159,7 @@ def dense_recall(stored, q, cfg, K, in_order=False):
         if moved or strength < cfg.min_strength:
             break
         found.append((s.bool(), strength.item()))
+        drive = drive * (1 - s[OBJ])
         x, sign = torch.cat([x, s.flatten()[None]]), torch.cat([sign, -torch.ones(1, dtype=torch.double)])
     return found if in_order else sorted(found, key=lambda f: -f[1])
 
@@ -233,6 +237,58 @@ def test_unbounded_recall_is_the_networks_own_number_and_a_bound_cuts_only_beyon
         assert torch.equal(cut.episodes[whole], free.episodes[whole, :bound])
         assert torch.equal(cut.strength[whole], free.strength[whole, :bound])
         assert (cut.valid[~whole].sum(1) == bound).all()
+
+
+def test_a_miss_takes_the_cues_strongest_neurons_out_and_the_recall_goes_on(monkeypatch):
+    """Cue A at 1 and B at 0.8, to the 16th power: the drive clamps A at 1 and B at 0.8^16 = 0.03. If that first
+    retrieval settles nowhere, misses=0 ends the recall with nothing; misses=1 takes out the drive's neurons at
+    >= 0.5^(1/16) = 0.96 of its peak (A's: 1, not B's: 0.8) and retrieves again from B alone, at B's strength."""
+    q = cue((A, 1.0), (B, 0.8))
+    seen = []
+    real = EpisodicMemory._settle
+
+    def first_misses(self, drive, net):
+        seen.append(drive.clone())
+        state, fixed = real(self, drive, net)
+        return state, fixed & (len(seen) > 1)
+    monkeypatch.setattr(EpisodicMemory, "_settle", first_misses)
+    assert not memory(A, B, Cc, cue_power=16.0).recall(q).any.item() and len(seen) == 1
+    seen.clear()
+    out = memory(A, B, Cc, cue_power=16.0, misses=1).recall(q)
+    assert torch.equal(seen[1], q * (1 - A[OBJ].float()))
+    assert torch.equal(out.episodes[0, 1], B) and out.strength[0, 1].item() == pytest.approx(0.8)
+    # B's neurons leave the drive in turn; from the spent drive (all 0) the sheet still settles, into A, which
+    # comes back at its strength from the cue as given, 1
+    assert not seen[2].any() and torch.equal(out.episodes[0, 0], A) and out.strength[0, 0].item() == 1.0
+    with pytest.raises(ValueError, match="misses"):
+        MemoryConfig(misses=1)    # cue_power 1: the cue is clamped as given, there is no drive to take from
+
+
+def test_misses_leave_the_recall_before_the_first_miss_as_it_was():
+    """Agent-like episodes and random graded cues to the 16th power: with misses=0 the recall is the dense
+    reference's (first miss ends it); with misses=2 every episode of that recall comes back with the same strength,
+    and some cues go on past a miss to recall more."""
+    g = torch.Generator().manual_seed(7)
+    stored = []
+    for _ in range(12):
+        obj = torch.randperm(C, generator=g)[:5].tolist()
+        reward = [(3, 30), (7, 40), (0, 25)][int(torch.randint(3, (1,), generator=g))]
+        stored.append(episode(obj, reward, body_end=[(8, 9), (10, 11)][int(torch.randint(2, (1,), generator=g))]))
+    cues = torch.rand(24, C, generator=g) ** 2
+    base = memory(*stored, cue_power=16.0, max_recalls=None, max_episodes=12).recall(cues)
+    more = memory(*stored, cue_power=16.0, misses=2, max_recalls=None, max_episodes=12).recall(cues)
+    went_on = 0
+    for b in range(len(cues)):
+        want = dense_recall(stored, cues[b].double(), MemoryConfig(cue_power=16.0), 100)
+        assert base.valid[b].sum().item() == len(want)
+        for k, (e, strength) in enumerate(want):
+            assert torch.equal(base.episodes[b, k], e)
+            assert base.strength[b, k].item() == pytest.approx(strength, abs=1e-6)
+        got = [(more.episodes[b, k], more.strength[b, k].item()) for k in range(int(more.valid[b].sum()))]
+        for e, strength in want:
+            assert any(torch.equal(e, f) and t == pytest.approx(strength, abs=1e-6) for f, t in got)
+        went_on += len(got) > len(want)
+    assert went_on >= 3
 
 
 def test_the_free_phase_starts_from_the_clamped_phase_last_prediction(monkeypatch):
