@@ -37,6 +37,16 @@ def cue(*parts):
     return q[None]
 
 
+def agent_like_episodes(n, g):
+    """Shared rows, a random 5-neuron object code, one of 3 rewards and one of 2 body states."""
+    stored = []
+    for _ in range(n):
+        obj = torch.randperm(C, generator=g)[:5].tolist()
+        reward = [(3, 30), (7, 40), (0, 25)][int(torch.randint(3, (1,), generator=g))]
+        stored.append(episode(obj, reward, body_end=[(8, 9), (10, 11)][int(torch.randint(2, (1,), generator=g))]))
+    return stored
+
+
 def random_episodes(n, g, rows=R):
     x = torch.zeros(n, R, C, dtype=torch.bool)
     order = torch.rand(n, R, C, generator=g).argsort(-1)
@@ -192,11 +202,7 @@ def test_a_spurious_fixed_point_is_depressed_as_its_outer_product():
     instead of after free_steps). A stored episode is depressed by masking its term, any other state by subtracting
     its outer product; both as the dense network that stores each retrieved state with weight -1."""
     g = torch.Generator().manual_seed(3)
-    stored = []
-    for _ in range(8):
-        obj = torch.randperm(C, generator=g)[:5].tolist()
-        reward = [(3, 30), (7, 40), (0, 25)][int(torch.randint(3, (1,), generator=g))]
-        stored.append(episode(obj, reward, body_end=[(8, 9), (10, 11)][int(torch.randint(2, (1,), generator=g))]))
+    stored = agent_like_episodes(8, g)
     mem = memory(*stored)
     cues = torch.rand(20, C, generator=g) ** 3
     out = mem.recall(cues, max_recalls=6)
@@ -269,11 +275,7 @@ def test_misses_leave_the_recall_before_the_first_miss_as_it_was():
     reference's (first miss ends it); with misses=2 every episode of that recall comes back with the same strength,
     and some cues go on past a miss to recall more."""
     g = torch.Generator().manual_seed(7)
-    stored = []
-    for _ in range(12):
-        obj = torch.randperm(C, generator=g)[:5].tolist()
-        reward = [(3, 30), (7, 40), (0, 25)][int(torch.randint(3, (1,), generator=g))]
-        stored.append(episode(obj, reward, body_end=[(8, 9), (10, 11)][int(torch.randint(2, (1,), generator=g))]))
+    stored = agent_like_episodes(12, g)
     cues = torch.rand(24, C, generator=g) ** 2
     base = memory(*stored, cue_power=16.0, max_recalls=None, max_episodes=12).recall(cues)
     more = memory(*stored, cue_power=16.0, misses=2, max_recalls=None, max_episodes=12).recall(cues)
