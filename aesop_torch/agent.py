@@ -129,8 +129,8 @@ class AgentConfig:
     # cue 48 / 49 / 35 -> 54 / 62 / 78; probes more than 2 points above their senses' floor 14 / 17 / 32 -> 12 / 5 / 4
     # of 320; error above the floor -0.17 / -0.07 / +0.08 -> -0.05 / -0.10 / -0.16 points (median error 2.11 /
     # 2.32 / 2.11 -> 2.11 / 2.32 / 2.19 %, at the floor)
-    # No recall bound: a cue brings back every episode the network settles into (~40 of ~180 stored for a novel
-    # object after 230 objects, benches/learning_curve.py). A bound of 16 changed what a long life learns and
+    # No recall bound: a cue brings back every episode the network settles into (~76 of ~180 stored for a novel
+    # object after 230 objects, ~32 ending at the first miss; benches/learning_curve.py). A bound of 16 changed what a long life learns and
     # predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects: 3.8 3.7 2.7 3.4 2.3 1.8 %
     # bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not a bound for speed
     memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,

@@ -263,13 +263,15 @@ def side_by_side(ours_fn, ref_fn, repeats: int = 3) -> tuple[float, float]:
     return statistics.median(t_ours), statistics.median(t_ref)
 
 
-def throughput_line(label: str, mem: EpisodicMemory, ref: DenseEpisodicMemory, cues: torch.Tensor, k=None):
+def throughput_line(label: str, mem: EpisodicMemory, ref: EpisodicMemory, cues: torch.Tensor, k=None,
+                    peer: str = "reference"):
     a, b = mem.recall(cues, max_recalls=k), ref.recall(cues, max_recalls=k)
     same = sum(all(torch.equal(x[i], y[i]) for x, y in zip(a, b)) for i in range(len(cues)))
     t_ours, t_ref = side_by_side(lambda: mem.recall(cues, max_recalls=k), lambda: ref.recall(cues, max_recalls=k))
-    print(f"{label}: {len(cues) / t_ours:8.0f} cues/s, reference {len(cues) / t_ref:6.0f} cues/s, "
-          f"{t_ref / t_ours:5.2f}x ({a.valid.sum(1).float().mean().item():.1f} episodes per cue; "
-          f"{same} of {len(cues)} recalls identical to the reference's)", flush=True)
+    print(f"{label}: {len(cues) / t_ours:8.0f} cues/s, {peer} {len(cues) / t_ref:6.0f} cues/s, "
+          f"{t_ref / t_ours:5.2f}x ({a.valid.sum(1).float().mean().item():.1f} episodes per cue, {peer} "
+          f"{b.valid.sum(1).float().mean().item():.1f}; {same} of {len(cues)} recalls identical to the {peer}'s)",
+          flush=True)
 
 
 def copy_into(cls, mem: EpisodicMemory, **config):
@@ -303,12 +305,8 @@ def throughput_section():
             throughput_line(f"230 of the agent's episodes (set {SEED}), its 230 objects and 16 probes as cues, "
                             f"misses=0, max_recalls={bound}", first_miss,
                             copy_into(DenseEpisodicMemory, first_miss), cues, k)
-        misses = agent.memory.config.misses
-        a, b = agent.memory.recall(cues), first_miss.recall(cues)
-        t_ours, t_first = side_by_side(lambda: agent.memory.recall(cues), lambda: first_miss.recall(cues))
-        print(f"the same, as the agent recalls (misses={misses}, no bound): {len(cues) / t_ours:8.0f} cues/s, "
-              f"misses=0 {len(cues) / t_first:6.0f} cues/s ({a.valid.sum(1).float().mean().item():.1f} episodes per "
-              f"cue, misses=0 {b.valid.sum(1).float().mean().item():.1f})", flush=True)
+        throughput_line(f"the same, as the agent recalls (misses={agent.memory.config.misses}, no bound)",
+                        agent.memory, first_miss, cues, peer="misses=0")
         agents = 4096
         x = torch.stack([agent_episodes(8, torch.Generator().manual_seed(b)) for b in range(64)]).repeat(64, 1, 1, 1)
         mem = EpisodicMemory(MemoryConfig(max_episodes=8), batch=agents)
