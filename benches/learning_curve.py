@@ -11,7 +11,9 @@ the senses leave (Archimedes itself applied to the probes as the robot measures 
 water at 1 g/cm^3), and how many episodes the agent had stored and recalled per cue. Once the median reaches the
 floor it can fall no further, so two more columns say whether learning goes on: how far the agent's error sits
 above each probe's own floor (mean over probes, median over sets) and how many probes are more than 2 points
-above it. Last line: `median_error_8=E ... median_error_230=E`.
+above it. And, since a median over sets can rise while most sets fall (or the reverse), each set's own curve:
+how many sets' errors fell and rose since the previous count, and the median over sets of that change. Last line:
+`median_error_8=E ... median_error_230=E`.
 
 The model's numbers were chosen on sets of seeds 1000 and up; the default seeds here (0..) were never looked at
 while choosing them.
@@ -81,6 +83,12 @@ def life(seed: int, n_train: int, bar) -> dict:
     return out
 
 
+def _moves(change: list[float]) -> str:
+    """Sets whose error fell / rose since the previous count, and the median of the change."""
+    fell, rose = sum(d < 0 for d in change), sum(d > 0 for d in change)
+    return f"{f'{fell}/{rose}':>15} {statistics.median(change):>+14.4f}"
+
+
 def main():
     keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
@@ -100,17 +108,19 @@ def main():
     print(f"\n{a.sets} sets of {a.objects} train + 16 probe objects, one order each: median over probes, then over "
           f"sets")
     print(f"{'explored':>9} {'agent':>8} {'kNN':>8} {'MLP':>8} {'stored':>7} {'recalled/cue':>13} "
-          f"{'over floor':>11} {'probes >2 pts over':>19}")
+          f"{'over floor':>11} {'probes >2 pts over':>19} {'sets fell/rose':>15} {'median change':>14}")
     floor = statistics.median(lf["floor"] for lf in lives)
     med = {who: {n: statistics.median(lf[who][n] for lf in lives) for n in checks}
            for who in ("agent", "knn", "mlp", "stored", "recalled", "excess")}
-    for n in checks:
+    for before, n in zip([None] + checks, checks):
+        moved = "" if before is None else _moves([lf["agent"][n] - lf["agent"][before] for lf in lives])
         print(f"{n:>9} {med['agent'][n]:>8.4f} {med['knn'][n]:>8.3f} {med['mlp'][n]:>8.3f} "
               f"{med['stored'][n]:>7.0f} {med['recalled'][n]:>13.1f} {med['excess'][n]:>+11.4f} "
-              f"{sum(lf['gross'][n] for lf in lives):>19}")
+              f"{sum(lf['gross'][n] for lf in lives):>19} {moved}".rstrip())
     print(f"the senses' floor (Archimedes on the measured probes): {floor:.4f}. over floor: a set's mean over its "
           f"probes of the agent's error less the probe's floor (median over sets); probes >2 pts over: of "
-          f"{16 * a.sets}, those more than 2 points above their floor (the gross errors, summed over sets)")
+          f"{16 * a.sets}, those more than 2 points above their floor (the gross errors, summed over sets); sets "
+          f"fell/rose, median change: each set's error against its own at the previous count")
     print(f"{time.perf_counter() - t0:.0f} s")
     print(" ".join(f"median_error_{n}={med['agent'][n]:.4f}" for n in checks))   # 4 places: 2 % is a target
 
