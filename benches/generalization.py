@@ -61,9 +61,14 @@ def raw_features(meas: dict) -> torch.Tensor:
     return torch.cat([meas["rgb"], meas["extent_cm"].log(), meas["fill"][:, None], meas["mass_g"].log()[:, None]], 1)
 
 
+def probe_errors(pred: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
+    """(..., n_probes) predictions -> each probe's relative error (NaN counts as 1: nothing predicted)."""
+    return torch.nan_to_num((pred - truth).abs() / truth, nan=1.0)
+
+
 def rel_errors(pred: torch.Tensor, truth: torch.Tensor) -> torch.Tensor:
     """(B, n_probes) predictions -> (B,) median over probes of the relative error (NaN counts as 1)."""
-    err = torch.nan_to_num((pred - truth).abs() / truth, nan=1.0)
+    err = probe_errors(pred, truth)
     return err.median(dim=1).values if err.shape[1] % 2 else err.sort(dim=1).values[:, err.shape[1] // 2 - 1:
                                                                                     err.shape[1] // 2 + 1].mean(1)
 

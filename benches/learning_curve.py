@@ -34,7 +34,7 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 import torch  # noqa: E402
 
 from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
-from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
+from generalization import knn, mlp, probe_errors, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
@@ -61,7 +61,7 @@ def life(seed: int, n_train: int, bar) -> dict:
     x_all, y_all = raw_features(meas), torch.tensor([r["observed_cm3"] for r in rec]).log()
     xq = raw_features(pmeas)
     sensed = torch.minimum(pmeas["mass_g"], pmeas["fill"] * pmeas["extent_cm"].prod(-1))
-    floor = (sensed - truth).abs() / truth       # each probe's error were it read by Archimedes from the senses
+    floor = probe_errors(sensed, truth)       # each probe's error were it read by Archimedes from the senses
     out = {"agent": {}, "knn": {}, "mlp": {}, "stored": {}, "recalled": {}, "excess": {}, "gross": {},
            "floor": float(rel_errors(sensed[None], truth)[0])}
     for t, r in enumerate(rec):
@@ -74,7 +74,7 @@ def life(seed: int, n_train: int, bar) -> dict:
         probe = agent.select(torch.zeros(len(truth), dtype=torch.long)).anticipate(pmeas)   # a copy per probe
         pred = probe.expected[None]
         out["agent"][n] = float(rel_errors(pred, truth)[0])
-        excess = torch.nan_to_num((pred[0] - truth).abs() / truth, nan=1.0) - floor
+        excess = probe_errors(pred[0], truth) - floor
         out["excess"][n], out["gross"][n] = float(excess.mean()), int((excess > 0.02).sum())
         out["knn"][n] = float(rel_errors(knn(x_all[None, :n], y_all[None, :n], xq).exp(), truth)[0])
         out["mlp"][n] = float(rel_errors(mlp(x_all[None, :n], y_all[None, :n], xq, seed * 1000 + n).exp(), truth)[0])
