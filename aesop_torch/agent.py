@@ -130,12 +130,12 @@ class AgentConfig:
     # of 320; error above the floor -0.17 / -0.07 / +0.08 -> -0.05 / -0.10 / -0.16 points (median error 2.11 /
     # 2.32 / 2.11 -> 2.11 / 2.32 / 2.19 %, at the floor)
     # No recall bound: a cue brings back every episode the network settles into (~76 of ~180 stored for a novel
-    # object after 230 objects, ~32 ending at the first miss; benches/learning_curve.py). A bound of 16 changed what a long life learns and
-    # predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects: 3.8 3.7 2.7 3.4 2.3 1.8 %
-    # bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not a bound for speed
+    # object after 230 objects, ~32 ending at the first miss; benches/learning_curve.py). A bound of 16 changed what
+    # a long life learns and predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects:
+    # 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not
+    # a bound for speed
     memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
-                                                                      cue_power=16.0, misses=2,
-                                                                      max_recalls=None))
+                                                                      cue_power=16.0, misses=2, max_recalls=None))
     rules: RulesConfig = field(default_factory=RulesConfig)
     # the property maps are trained before the experiment on the infant's prior experience; 4000 samples cover
     # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
