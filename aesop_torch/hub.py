@@ -127,7 +127,8 @@ class ObjectHub(nn.Module):
         return torch.where(pattern >= self.config.store_floor, pattern, torch.zeros_like(pattern))
 
     # -- activity flows -----------------------------------------------------------------------------------------
-    def bottom_up(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+    def bottom_up(self, acts: torch.Tensor, present: torch.Tensor, strength: torch.Tensor | None = None
+                  ) -> torch.Tensor:
         """Maps -> hub. acts (B, P, U_max) graded map activities, present (B, P) maps with input -> (B, N) in [0, 1].
 
         u_k = max over the stored objects o whose assembly holds k of sum_m s_m d_om / sum_m s_m over the present
@@ -147,13 +148,15 @@ class ObjectHub(nn.Module):
         input: the stored object's own assembly was the top 5 of the drive for under a third of the objects.)
         With at most 10 objects the assemblies are disjoint and both readings are the same.
         """
-        score = self.object_match(acts, present)                                  # (B, A)
+        score = self.object_match(acts, present, strength)                        # (B, A)
         on = self.assemblies.to(score.dtype)
         return (score[:, :, None] * on).amax(1) if on.shape[1] else score.new_zeros(on.shape[0], on.shape[2])
 
-    def object_match(self, acts: torch.Tensor, present: torch.Tensor) -> torch.Tensor:
+    def object_match(self, acts: torch.Tensor, present: torch.Tensor, strength: torch.Tensor | None = None
+                     ) -> torch.Tensor:
         """(B, A): how well the input matches each stored object, the sum in `bottom_up` taken over one object's
-        own stored patterns (its branch on the hub neurons), 0 for an empty slot."""
+        own stored patterns (its branch on the hub neurons), 0 for an empty slot. strength (B, P): the pathway
+        strengths to use instead of the hub's own (an ablation's)."""
         acts, present = self._check(acts, present)
         if self.config.relative_activity:
             acts = _relative(acts)
@@ -164,7 +167,8 @@ class ObjectHub(nn.Module):
                              torch.ones_like(self.branch_norm))
         drive = torch.einsum("bpu,bapu->bap", acts, self.branches) / torch.maximum(self.branch_norm, energy) \
             .clamp_min(1e-12)
-        gate = self.strength[:, None, :] * present[:, None, :] * (self.branch_norm > 0)   # (B, A, P)
+        strength = self.strength if strength is None else strength
+        gate = strength[:, None, :] * present[:, None, :] * (self.branch_norm > 0)   # (B, A, P)
         den = gate.sum(-1)
         return torch.where(den > 0, (gate * drive.clamp(0.0, 1.0)).sum(-1) / den.clamp_min(1e-12),
                            torch.zeros_like(den))

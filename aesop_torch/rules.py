@@ -69,6 +69,10 @@ class RulesConfig:
     # "strengthen": a dominant pathway counts as much as the three other properties together at full strength,
     # so recall (and with it prediction) is led by the causal property.
     dominant_strength: float = 3.0
+    # the paper model's Growth (incremental_rules.py): each clean firing adds this to the pathway, up to
+    # dominant_strength. 1.0: one Growth makes a property dominant (2x), two take it to the cap, so a pathway a later
+    # Elimination reduces was not built on one confound alone.
+    growth_step: float = 1.0
     # "marginally reduce": each Uncertainty firing keeps 85 % of an undecided pathway.
     uncertain_decay: float = 0.85
     # ... but never below this: Uncertainty cannot tell whether the property matters ("unless further experience is

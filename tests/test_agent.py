@@ -28,9 +28,9 @@ def letters(step, b=0):
     return "".join(RULE_NAMES[int(r)] for r in step.rules_fired()[b])
 
 
-@pytest.fixture(scope="module")
-def paper():
-    agent = Agent(AgentConfig(seed=0))
+@pytest.fixture(scope="module", params=["paper", "extended"])
+def paper(request):
+    agent = Agent(AgentConfig.named(request.param, seed=0))
     e1 = drop(agent, lifted(RED, 420), 365.0, True)
     e2 = drop(agent, lifted(BLUE, 420), 365.0, True)
     e3 = drop(agent, lifted(RED, 14), 24.0, False)
@@ -81,7 +81,7 @@ HAND_SET = [  # (rgb, diameter, height, mass): what each pair changes is in the 
 
 @pytest.fixture(scope="module")
 def hand_made():
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     for rgb, d, h, mass in HAND_SET:
         m, v, sinks = cylinder(rgb, d, h, mass)
         agent.step(m, torch.tensor([v]), torch.zeros(1, dtype=torch.bool), torch.zeros(1, dtype=torch.bool),
@@ -117,7 +117,7 @@ def test_readout_follows_each_fates_law_and_the_boundary_learned_from_memory():
     """Features by hand (rgb, log fill, log size, log mass): floaters displace their mass, sinkers their volume
     (fill x size^3). The fits follow weight for floaters and size for sinkers; which fit applies comes from a
     boundary learned on the recalled fates (heavy for its size sinks)."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 3] = True              # floating: weight
     agent.rules.dominant[0, 1, 2] = True              # sinking: size
     def feat(size_cm, mass_g):
@@ -143,7 +143,7 @@ def test_sinkers_of_another_shape_and_size_are_read_by_their_volume():
     """Sinkers displace fill x size^3. Two recalled sinkers, a cube (fill 1) of 4 cm and a sphere (fill pi/6) of
     6 cm, fix a line in log volume; a cylinder (fill pi/4) of 5 cm lies on it, with shape and size both followed.
     Two episodes cannot fix separate slopes for fill and size, so only the volume column hits the cylinder's."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 1, 1] = agent.rules.dominant[0, 1, 2] = True    # sinking: shape and size
 
     def feat(fill, size_cm):
@@ -164,7 +164,7 @@ def test_the_fit_follows_the_one_property_that_explains_the_rewards():
     """Three floaters, both size and weight followed. They displace their mass: weight alone fits them exactly
     (residual 0), size alone does not (the heaviest is the middle size), so the fit follows weight and reads a
     120 g floater of a size none of them had at exactly 120."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 2] = agent.rules.dominant[0, 0, 3] = True    # floating: size and weight
 
     floaters = [(6.0, 10.0), (7.0, 40.0), (8.0, 20.0)]
@@ -189,14 +189,14 @@ def test_delta_property_sees_an_eliminated_pathway(paper):
 
 
 def test_nothing_recalled_predicts_nan():
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     assert math.isnan(agent.predict(lifted(RED, 420)).item())
 
 
 def test_batched_agents_match_single_agents_and_state_dict_round_trips():
     # agent 0 sees red, blue; agent 1 sees blue, red (two orders side by side)
-    both = Agent(AgentConfig(seed=3), batch=2)
-    singles = [Agent(AgentConfig(seed=3)), Agent(AgentConfig(seed=3))]
+    both = Agent(AgentConfig.extended(seed=3), batch=2)
+    singles = [Agent(AgentConfig.extended(seed=3)), Agent(AgentConfig.extended(seed=3))]
     seq = [(RED, BLUE), (BLUE, RED)]
     for t in range(2):
         m = {k: torch.cat([lifted(seq[0][t], 420)[k], lifted(seq[1][t], 420)[k]]) for k in lifted(RED, 1)}
@@ -207,7 +207,7 @@ def test_batched_agents_match_single_agents_and_state_dict_round_trips():
     for b in range(2):
         assert both.knowledge(b) == singles[b].knowledge(0)
         assert torch.equal(both.memory.patterns[b], singles[b].memory.patterns[0])
-    copy = Agent(AgentConfig(seed=3), batch=2)
+    copy = Agent(AgentConfig.extended(seed=3), batch=2)
     copy.load_state_dict(both.state_dict())
     probe = {k: torch.cat([v, v]) for k, v in lifted(RED, 400).items()}
     assert torch.equal(copy.predict(probe), both.predict(probe))
@@ -230,7 +230,7 @@ def test_pairwise_evidence_gives_the_batch_answer_of_the_paper_episodes(paper):
 def test_a_lifetime_of_objects_is_recalled_exactly_and_a_novel_one_finds_its_nearest_first():
     # 32 cylinders on a grid of mass and size, each remembered once: every one comes back first and exact from its
     # own cue (the hub over 12 rows), and a novel object between two stored ones recalls those two first
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     sizes, masses = (3.0, 5.0, 8.0, 12.0), (10.0, 20.0, 40.0, 80.0, 160.0, 320.0, 640.0, 1280.0)
     grid = [(d, m) for d in sizes for m in masses]
     for d, m in grid:
@@ -250,7 +250,7 @@ def test_an_object_like_a_stored_one_in_three_maps_gets_an_assembly_of_its_own()
     """With the match threshold at 0.5 the hub alone would take a 40 g cylinder for the stored 420 g one: three of
     four maps are the same, a match of 3/4. Its weight differs from what that assembly retro-activates
     (DeltaProperty), so it is another object. The same cylinder measured again is the same object."""
-    cfg = AgentConfig(seed=0)
+    cfg = AgentConfig.extended(seed=0)
     cfg.hub.match_threshold = 0.5
     agent = Agent(cfg)
     no = torch.zeros(1, dtype=torch.bool)
@@ -268,11 +268,11 @@ def test_a_property_in_its_dead_zone_leaves_out_a_contradiction_but_not_a_held_o
     zone (0.049 + 1 g / 420 g = 0.051 .. 0.223 + 3 g / 420 g = 0.230), colour clearly changed. Where the outcome
     held, colour changed and did nothing: Elimination. Where the outcome moved, the weight in its dead zone may have
     moved it: the comparison is left out, no rule fires."""
-    held = Agent(AgentConfig(seed=0))
+    held = Agent(AgentConfig.extended(seed=0))
     drop(held, lifted(RED, 420), 365.0, True)
     e = drop(held, lifted(BLUE, 470), 365.0, True)
     assert letters(e) == "ESSS" and held.rules.by_context(0)["mixed"]["irrelevant"] == ["color"]
-    moved = Agent(AgentConfig(seed=0))
+    moved = Agent(AgentConfig.extended(seed=0))
     drop(moved, lifted(RED, 420), 365.0, True)
     e = drop(moved, lifted(BLUE, 470), 200.0, True)
     assert e.recalled.item() and letters(e) == "SSSS"
@@ -284,7 +284,7 @@ def test_a_recall_bound_changes_nothing_while_the_memory_holds_no_more_episodes(
     default experiment) brings back the same episodes, and the agent learns and predicts the same."""
     results = []
     for bound in (8, None):
-        cfg = AgentConfig(seed=0)
+        cfg = AgentConfig.extended(seed=0)
         cfg.memory.max_recalls = bound
         agent = Agent(cfg)
         for rgb, d, h, mass in HAND_SET:
@@ -304,7 +304,7 @@ def test_the_fate_boundary_reads_the_volume_and_both_fates_are_kept():
     fills 65 cm^3, about a 4 cm cube: at 120 g it sinks, at 35 g it floats, though it is larger than every cube (a
     boundary on size and fill apart is unsure of the 120 g one: P(sinks) 0.70).
     by_fate holds what it would displace either way (its mass if it floats, its volume if it sinks)."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
     agent.rules.dominant[0, 1, 1] = agent.rules.dominant[0, 1, 2] = True    # sinking: shape and size
     ball = math.pi / 6
@@ -332,7 +332,7 @@ def test_an_extensive_property_is_read_as_a_proportion_weighted_by_how_well_the_
     logs), its ratio the mean of the log ratios, each weighted by m^2 / (m^2 + (1 g / 0.02)^2) (all within Huber's
     5 % of it): by hand, read at a 200 g floater. A free slope through the three extrapolates their noise (149 cm^3
     at 200 g)."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
 
     def feat(mass_g):
@@ -352,7 +352,7 @@ def test_an_episode_far_off_its_fit_counts_less():
     """Six sinkers that displace their volume, one recalled with another object's reward (x 1.5: a mixed-up
     recall). Least squares puts the ratio at exp(ln 1.5 / 6) = 1.07; Huber's reweighting (weight 0.05 / |residual|
     beyond 0.05, twice), computed here by hand on the six log ratios, brings it within 1.1 %."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
 
     def feat(size_cm):
@@ -380,7 +380,7 @@ def test_the_fate_is_read_where_the_two_fits_cross():
     sinks iff its mass exceeds its volume, whatever its size: an 8 cm cube of 300 g floats (300 cm^3), one of
     900 g sinks (512 cm^3), a 2 cm cube of 20 g sinks (8 cm^3), a 5 cm one of 100 g floats (100 cm^3). A boundary
     over size and mass apart, from these eight, is unsure of the two floaters (P(sinks) 0.47 and 0.41)."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 3] = True                                    # floating: weight
     agent.rules.dominant[0, 1, 2] = True                                    # sinking: size
 
@@ -400,7 +400,7 @@ def test_a_dominant_property_does_not_hide_one_the_rewards_follow():
     """Floaters, size dominant for them (a confounded comparison can do that) and weight neither dominant nor ruled
     out: they displace their mass, and their volumes do not follow it (densities 0.2-0.9), so the readout reads the
     mass (40 g -> 40 cm^3), not the volume. Once weight is eliminated for floaters it reads the volume."""
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 2] = True                                    # floating: size
 
     floaters = [(3.0, 20.0), (4.0, 12.8), (5.0, 60.0), (6.0, 100.0)]
@@ -419,7 +419,7 @@ def test_a_context_with_nothing_dominant_follows_what_is_not_ruled_out():
     exactly: they displace their volume), instead of reading them by the floaters' weight. Their masses do not
     follow their volumes (200, 150, 400 g for 3, 4, 5 cm), so a fit on weight misses the 4.5 cm one."""
     from aesop_torch.rules import DOMINANT
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.dominant[0, 0, 3] = True                  # floating: weight
     agent.rules.state[0, 3] = DOMINANT
     fill = math.pi / 4
@@ -439,7 +439,7 @@ def test_a_property_eliminated_for_floaters_is_still_followed_by_sinkers():
     fit still tries size, which sinkers alone have not eliminated, and keeps it, since their rewards follow it
     exactly (they displace their volume); their colours and masses do not follow their volumes."""
     from aesop_torch.rules import DOMINANT, IRRELEVANT
-    agent = Agent(AgentConfig(seed=0))
+    agent = Agent(AgentConfig.extended(seed=0))
     agent.rules.eliminated[0, 0, 2] = True                # floating: size
     agent.rules.dominant[0, 1, 0] = True                  # sinking: colour
     agent.rules.state[0, 0], agent.rules.state[0, 2] = DOMINANT, IRRELEVANT
@@ -460,7 +460,7 @@ def test_a_property_eliminated_for_floaters_is_still_followed_by_sinkers():
 def test_the_agent_recalls_as_many_episodes_as_the_network_brings_back():
     """No recall bound in the agent: with 24 distinct objects stored, a cue brings back more than 16 of them (the
     network's own number, every episode the cue touches; 16 was the agent's bound before)."""
-    cfg = AgentConfig(seed=0)
+    cfg = AgentConfig.extended(seed=0)
     cfg.memory.max_episodes = cfg.hub.max_assemblies = 24
     agent = Agent(cfg)
     assert cfg.memory.max_recalls is None

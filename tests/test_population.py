@@ -32,8 +32,9 @@ def world():
     return [s.name for s in objs.train], [p.name for p in objs.probe], outcomes, probes
 
 
-def experiment(names, probe_names, orders, outcomes, probes):
-    exp = Experiment(list(names), probe_names, orders)
+def experiment(names, probe_names, orders, outcomes, probes, model="extended"):
+    """The hand-counted cases below are the extended model's (its knowledge is a function of the evidence set)."""
+    exp = Experiment(list(names), probe_names, orders, config=AgentConfig.named(model))
     exp.probes = probes
     while not exp.done:
         exp.step(lambda name, b, t: outcomes[name])
@@ -76,13 +77,14 @@ def test_all_orders_of_five_match_experiment(mixed):
     assert pop["agent_steps"] == sum(pop["steps_per_level"]) < 5 + 20 + 60 + 120 + 120
 
 
-def test_subset_with_a_repeated_order_matches_experiment(world):
-    """A trie over any given orders: random ones, one given twice (same leaf, reported for both)."""
+@pytest.mark.parametrize("model", ["extended", "paper"])
+def test_subset_with_a_repeated_order_matches_experiment(world, model):
+    """A trie over any given orders: random ones, one given twice (same leaf, reported for both); either model."""
     train, probe_names, outcomes, probes = world
     names = train[:6]
     orders = draw_orders(len(names), "20", seed=3)
     orders.append(list(orders[4]))
-    exp = experiment(names, probe_names, orders, outcomes, probes)
+    exp = experiment(names, probe_names, orders, outcomes, probes, model)
     pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=4, threads=1)
     assert_same_as_experiment(pop, exp)
     assert pop["final_knowledge"][-1] == pop["final_knowledge"][4]
