@@ -108,9 +108,30 @@ def saved(tmp_path_factory, paper_file):
     exp.step(lambda name, b, t: outcomes[name])
     exp.step(lambda name, b, t: outcomes[name])
     path = tmp_path_factory.mktemp("ckpt") / "latest.pt"
-    run = {"objects": objects.canonical(), "seed": 0, "physics": "cached", "orders_arg": "2"}
+    run = {"objects": objects.canonical(), "seed": 0, "physics": "cached", "orders_arg": "2", "model": "paper",
+           "ablate": []}
     ck.save_atomic({"run": run, "experiment": exp.state_dict()}, path)
     return path, exp
+
+
+def test_a_checkpoint_from_before_the_two_models_reads_as_the_extended_model(tmp_path, paper_file):
+    """Before `model` existed every checkpoint held the extended model: one without the field loads as that."""
+    from aesop_torch.agent import AgentConfig
+    from sim.objects import load_objects
+    objects = load_objects(paper_file)
+    outcomes, probes = closed_form_outcomes(objects)
+    exp = Experiment([o.name for o in objects.train], [o.name for o in objects.probe], [[0, 1, 2]],
+                     config=AgentConfig.extended(), outcomes=outcomes, probes=probes)
+    exp.step(lambda name, b, t: outcomes[name])
+    state = exp.state_dict()
+    for key in ("model", "ablate", "compare_with"):
+        del state["config"][key]
+    run = {"objects": objects.canonical(), "seed": 0, "physics": "cached", "orders_arg": "listed"}
+    ck.save_atomic({"run": run, "experiment": state}, tmp_path / "old.pt")
+    again = load_experiment(tmp_path / "old.pt")
+    m = exp.probes["green_light_cylinder"]["measurement"]
+    assert again.config.model == "extended" and torch.equal(again.predict(m), exp.predict(m))
+    assert ck.load(tmp_path / "old.pt")["run"]["model"] == "extended"
 
 
 def test_round_trip_is_verified_and_readable_weights_only(saved):

@@ -24,7 +24,7 @@ FORMAT = "aesop-torch checkpoint"
 VERSION = 2
 # 64 detailed orders of 8 objects is ~6 MB; a file far beyond any real checkpoint is refused before it is read
 MAX_BYTES = 256 * 1024 * 1024
-RUN_KEYS = {"objects": dict, "seed": int, "physics": str, "orders_arg": str}
+RUN_KEYS = {"objects": dict, "seed": int, "physics": str, "orders_arg": str, "model": str, "ablate": list}
 EXPERIMENT_KEYS = {"train_names": list, "probe_names": list, "orders": list, "seed": int, "physics": str,
                    "config": dict, "t": int, "records": list, "outcomes": dict, "probes": dict, "agent": dict}
 OUTCOME_KEYS = {"measurement", "observed_cm3", "archimedes_cm3", "goal_before", "goal_after", "sank"}
@@ -153,10 +153,21 @@ def load(path: str | os.PathLike) -> dict:
         ok = False
     if not ok:
         raise CheckpointError(f"{path}: checksum mismatch, the file is damaged")
+    _from_before_models(state)
     problem = structure_problem(state)
     if problem:
         raise CheckpointError(f"{path}: wrong structure: {problem}")
     return state
+
+
+def _from_before_models(state: dict) -> None:
+    """A checkpoint written before there were two models holds the extended model (its rules and readout were the
+    only ones): name it so, as a checkpoint of today would."""
+    run, e = state["run"], state["experiment"]
+    if isinstance(run, dict) and isinstance(e, dict) and isinstance(e.get("config"), dict) \
+            and "model" not in run and "ablate" not in run and "model" not in e["config"]:
+        run["model"], run["ablate"] = "extended", []
+        e["config"] = {**e["config"], "model": "extended", "ablate": [], "compare_with": None}
 
 
 def upgrade(path: str | os.PathLike) -> None:
@@ -208,6 +219,9 @@ def structure_problem(state: dict) -> str | None:
         return "physics, seed or episode count out of range"
     if (e["physics"], e["seed"]) != (state["run"]["physics"], state["run"]["seed"]):
         return "run and experiment disagree on physics or seed"
+    config = e["config"]
+    if (config.get("model"), list(config.get("ablate", ()))) != (state["run"]["model"], state["run"]["ablate"]):
+        return "run and experiment disagree on the model or its ablations"
     if len(e["records"]) != len(e["orders"]) or any(not isinstance(r, list) or len(r) != e["t"] or
                                                     not all(isinstance(x, dict) for x in r) for r in e["records"]):
         return f"records must hold {e['t']} episode(s) for each of the {len(e['orders'])} orders"

@@ -1,6 +1,7 @@
 """The experiment runner: cumulative causal learning in the pybullet world, with checkpoints and tensorboard.
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
+                        [--model paper|extended] [--ablate rules|gating|prior ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
 Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic, checksummed),
@@ -33,6 +34,8 @@ FULL_TB_ORDERS = 16      # tensorboard run directories beyond this would drown a
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
 LOCK_NAME = ".lock"
+MODELS = ("paper", "extended")                                        # aesop_torch.agent.MODELS, without torch
+ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
@@ -83,6 +86,13 @@ def parse_args(argv):
                          "same seed, same run")
     ap.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"output directory (default: {DEFAULT_OUT})")
     ap.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
+    ap.add_argument("--model", choices=MODELS, default="paper",
+                    help="paper: the paper's mechanism (incremental rules, knowledge-gated recall, a weighted average "
+                         "of recalled rewards); extended: evidence-set rules with contexts and a readout fitted with "
+                         "the task's physics priors")
+    ap.add_argument("--ablate", action="append", default=[], metavar="PART",
+                    help="switch a part off (repeatable): rules (no rule fires), gating (the memory's cue ignores the "
+                         "strengths), prior (extended only: the readout without its physics priors)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default="cached",
                     help="simulate each distinct object once (cached) or every episode of every order")
     ap.add_argument("--frames", action="store_true", help="save camera frames of each simulated drop")
@@ -92,6 +102,10 @@ def parse_args(argv):
         from sim.world import gui_unavailable
         if why := gui_unavailable():
             raise UsageError(f"--gui: {why}")
+    if bad := [p for p in a.ablate if p not in ABLATIONS[a.model]]:
+        raise UsageError(f"--ablate {bad[0]}: not a part of the {a.model} model (it has: "
+                         f"{', '.join(ABLATIONS[a.model])})")
+    a.ablate = list(dict.fromkeys(a.ablate))
     if a.resume and a.out is None:
         raise UsageError("--resume needs --out DIR (the run to continue)")
     if a.out is None:
@@ -218,8 +232,10 @@ def prepare(args, objects, n_orders: int, physics=None):
         orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
         if physics is not None:
             physics.start()
+        from aesop_torch.agent import AgentConfig
+        config = AgentConfig.named(args.model, ablate=tuple(args.ablate))
         return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
-                          physics=args.physics), False, lock
+                          physics=args.physics, config=config), False, lock
     except BaseException:
         os.close(lock)
         if created:   # refused or interrupted after all: leave nothing behind (rmdir: only if still empty)
@@ -241,7 +257,8 @@ def resume_experiment(args, objects):
         state = load(ckpt_path)
     except CheckpointError as e:
         raise UsageError(f"--resume: {e}; nothing was changed") from None
-    wanted = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics, "orders_arg": args.orders}
+    wanted = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics, "orders_arg": args.orders,
+              "model": args.model, "ablate": args.ablate}
     for key, value in wanted.items():
         if state["run"][key] != value:
             raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
@@ -358,13 +375,13 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
 
     from sim.objects import archimedes_cm3
     from train.checkpoint import save_atomic, write_text_atomic
-    from train.experiment import draw_orders, outcome_record, plain_measurement
+    from train.experiment import draw_orders, outcome_record, plain_measurement, senses_floor
     from train.drawing import Drawer
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
-                "orders_arg": args.orders}
+                "orders_arg": args.orders, "model": args.model, "ablate": args.ablate}
 
     def checkpoint():
         save_atomic({"run": run_meta, "experiment": exp.state_dict()}, ckpt)
@@ -450,7 +467,8 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
                 bar.update(1, recs[0]["object"])
     # Figure 2 shows the exploration: drawn and written by the drawer while the population and the goal trials run
     drawer = _OPEN["drawer"] = _OPEN["drawer"] or Drawer()   # main() started it
-    figure = drawer.draw("train.figures:save_figure2", exp.records, out / "figure2.png")
+    figure = drawer.draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110,
+                         senses_floor(exp.probes))
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
     if len(orders) > len(exp.orders):

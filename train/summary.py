@@ -34,7 +34,8 @@ def build_summary(exp, population: dict | None = None) -> dict:
     keys = population["final_knowledge"] if population else [knowledge_key(k) for k in finals]
     # one order cannot show independence of the order: undefined there (null), never a vacuous true
     independent = len(set(keys)) == 1 if len(keys) > 1 else None
-    summary = {"seed": exp.seed, "physics": exp.physics, "runs": runs, "order_independent": independent}
+    summary = {"seed": exp.seed, "physics": exp.physics, "model": exp.config.model, "ablate": list(exp.config.ablate),
+               "runs": runs, "order_independent": independent}
     if population:
         summary["population"] = {
             "orders": len(keys),
