@@ -1,30 +1,103 @@
-"""Figure 2's left panel shows knowledge states, so a dominant-to-irrelevant flip (certainty 1 both times) shows."""
+"""Figure 2 as the paper plots it: certainty 0..1 per property with every point's state named, and the error on a
+log axis against the senses' floor; a population as medians and bands, not a tangle of curves."""
+
+import math
 
 import numpy as np
+from matplotlib.collections import PolyCollection
 
 from aesop_torch.rules import PROPERTIES, STATES
-from train.figures import MAX_CURVES, STATE_COLOURS, figure2, state_grid
+from train.experiment import senses_floor
+from train.figures import MAX_CURVES, STATE_LETTERS, figure2, knowledge_arrays, save_figure2
+
+CERT = {"unknown": 0.0, "likely_irrelevant": 0.3, "dominant": 1.0, "irrelevant": 1.0}
 
 
-def episode(**states):
-    return {"knowledge": {p: {"state": states.get(p, "unknown"), "certainty": 1.0} for p in PROPERTIES},
-            "probe_rel_error": 0.5}
+def episode(error=0.5, **states):
+    return {"knowledge": {p: {"state": states.get(p, "unknown"), "certainty": CERT[states.get(p, "unknown")]}
+                          for p in PROPERTIES}, "probe_rel_error": error}
 
 
-def test_a_flip_between_states_of_equal_certainty_is_a_change_of_cell():
-    run = [episode(), episode(color="dominant"), episode(color="irrelevant", weight="likely_irrelevant")]
-    grid, labels = state_grid([run])
-    assert grid.shape == (len(PROPERTIES) + 3, 3) and labels[0].startswith("color")   # 3 gaps between 4
-    assert grid[0].tolist() == [STATES.index("unknown"), STATES.index("dominant"), STATES.index("irrelevant")]
-    assert grid[labels.index("weight  order 1"), 2] == STATES.index("likely_irrelevant")
-    assert len(set(STATE_COLOURS)) == len(STATES)
+def curves(ax):
+    """The lines spanning the episodes (not the floor, which spans the axis)."""
+    return [ln for ln in ax.lines if ln.get_transform() == ax.transData]
 
 
-def test_ten_orders_get_a_row_each_per_property():
-    runs = [[episode(size="dominant")] * 8 for _ in range(10)]
-    grid, labels = state_grid(runs)
-    assert grid.shape == (4 * 10 + 3, 8)                    # 10 rows per property, a gap between properties
-    assert np.isnan(grid[10]).all() and labels[11] == "shape  order 1"
-    assert state_grid(runs * 2)[0].shape[0] == 4 * MAX_CURVES + 3
+def letters(ax):
+    """{state letter: number of points drawn as it} on an axis."""
+    out = {}
+    for c in ax.collections:
+        if c.get_gid():
+            out[c.get_gid()] = out.get(c.get_gid(), 0) + len(c.get_offsets())
+    return out
+
+
+def test_the_left_lines_carry_the_certainties_and_a_flip_at_certainty_one_changes_letter():
+    runs = [[episode(), episode(color="dominant"), episode(color="irrelevant", weight="likely_irrelevant")],
+            [episode(size="likely_irrelevant"), episode(size="irrelevant"), episode(size="irrelevant")]]
+    cert, state = knowledge_arrays(runs)
+    assert cert.shape == state.shape == (2, len(PROPERTIES), 3)
+    assert state[0, 0].tolist() == [STATES.index(s) for s in ("unknown", "dominant", "irrelevant")]
     fig = figure2(runs)
-    assert len(fig.axes) == 2 and fig.get_figheight() > 4.6   # taller with more rows, so the cells stay readable
+    left, right = fig.axes
+    lines = curves(left)
+    assert len(lines) == len(PROPERTIES) * 2                              # a line per property per order
+    got = sorted(tuple(ln.get_ydata()) for ln in lines)
+    want = sorted(tuple(cert[b, i]) for b in range(2) for i in range(len(PROPERTIES)))
+    assert got == want and (0.0, 1.0, 1.0) in got and (0.0, 0.0, 0.3) in got
+    assert left.get_ylim()[0] <= 0 and left.get_ylim()[1] >= 1 and left.get_ylim()[1] < 1.2
+    # every one of the 2 x 4 x 3 points is drawn as its state's letter: dominant once, irrelevant three times
+    drawn = letters(left)
+    assert drawn["D"] == 1
+    assert drawn["I"] == 3 and drawn["L"] == 2
+    assert sum(drawn.values()) == 2 * len(PROPERTIES) * 3 and set(drawn) == set(STATE_LETTERS)
+    names = [t.get_text() for t in left.get_legend().get_texts()]
+    assert set(PROPERTIES) <= set(names) and "likely irrelevant" in names
+
+
+def test_the_error_is_on_a_log_axis_against_the_floor():
+    runs = [[episode(None), episode(0.5), episode(0.0)], [episode(None), episode(0.2), episode(0.05)]]
+    fig = figure2(runs, floor=0.03)
+    right = fig.axes[1]
+    assert right.get_yscale() == "log"
+    floor = [ln for ln in right.lines if ln.get_linestyle() == "--"]
+    assert len(floor) == 1 and np.allclose(floor[0].get_ydata(), 3.0)    # percent, across the axis
+    assert "floor" in floor[0].get_label()
+    orders = curves(right)
+    assert [ln.get_xdata().tolist() for ln in orders] == [[2, 3], [2, 3]]   # the None episodes skipped
+    assert orders[0].get_ydata()[1] == 0.01 and orders[1].get_ydata().tolist() == [20, 5]   # 0 clipped at 0.01 %
+    assert not [ln for ln in figure2(runs).axes[1].lines if ln.get_linestyle() == "--"]   # floor=None: none
+
+
+def test_a_population_draws_bands_over_all_orders_not_a_curve_each():
+    rng = np.random.default_rng(0)
+    runs = [[episode(float(rng.uniform(0.01, 1)), color="dominant" if t > b % 4 else "unknown") for t in range(6)]
+            for b in range(20)]
+    assert len(runs) > MAX_CURVES
+    left, right = figure2(runs, floor=0.02).axes
+    for ax in (left, right):
+        assert any(isinstance(c, PolyCollection) for c in ax.collections)
+    assert len(curves(left)) == len(PROPERTIES) and len(curves(right)) == 1   # medians, not 20 curves each
+    assert sum(letters(left).values()) == len(PROPERTIES) * 6     # the most common state, on the median
+    colour = curves(left)[0].get_ydata()
+    assert colour.tolist() == np.median([[1.0 if t > b % 4 else 0.0 for t in range(6)] for b in range(20)],
+                                        axis=0).tolist()
+    err = np.array([[r["probe_rel_error"] for r in run] for run in runs])
+    assert np.allclose(curves(right)[0].get_ydata(), 100 * np.median(err, axis=0))
+
+
+def test_save_figure2_writes_a_png_and_returns_its_pixels(tmp_path):
+    runs = [[episode(0.4, shape="likely_irrelevant"), episode(0.1, shape="dominant")]] * 3
+    pixels = save_figure2(runs, tmp_path / "f.png", dpi=50, floor=0.05)
+    assert pixels.dtype == np.uint8 and pixels.ndim == 3 and pixels.shape[2] == 3
+    assert (tmp_path / "f.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_the_senses_floor_is_the_median_error_of_the_best_sensed_reading():
+    floater = {"measurement": {"rgb": [1, 0, 0], "extent_cm": [5, 5, 5], "fill": 0.2, "mass_g": 10.0},
+               "archimedes_cm3": 10.5}     # reads min(10, 0.2 * 125 = 25) = 10: 0.5 / 10.5 off
+    sinker = {"measurement": {"rgb": [0, 0, 1], "extent_cm": [2, 2, 2], "fill": 1.0, "mass_g": 50.0},
+              "archimedes_cm3": 8.0}       # reads min(50, 8) = 8: exact
+    assert math.isclose(senses_floor({"a": floater, "b": sinker}), (0.5 / 10.5 + 0.0) / 2)
+    assert math.isclose(senses_floor({"a": floater}), 0.047619, rel_tol=1e-4)
+    assert senses_floor({}) is None

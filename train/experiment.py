@@ -92,6 +92,19 @@ def median_rel_error(predicted: torch.Tensor, truth: torch.Tensor) -> float | No
     return float(statistics.median(err.tolist()))
 
 
+def senses_floor(probes: dict) -> float | None:
+    """The error the robot's senses leave (Figure 2's floor): median over `Experiment.probes` of
+    |sensed - Archimedes| / Archimedes, sensed = min(mass_g, fill * extent volume), the best reading of Archimedes a
+    measurement allows (water 1 g/cm^3: a floater displaces its mass, a sinker its volume). None without probes."""
+    errs = []
+    for probe in probes.values():
+        m = probe["measurement"]
+        ext = [float(e) for e in m["extent_cm"]]
+        sensed = min(float(m["mass_g"]), float(m["fill"]) * ext[0] * ext[1] * ext[2])
+        errs.append(abs(sensed - probe["archimedes_cm3"]) / probe["archimedes_cm3"])
+    return float(statistics.median(errs)) if errs else None
+
+
 def _rounded(m: dict) -> dict:
     """A plain measurement to 3 decimals (rgb, fill) and 0.01 (cm, g): what a reader compares."""
     r = lambda v, d: [round(x, d) for x in v] if isinstance(v, list) else round(v, d)
