@@ -1,6 +1,7 @@
 """The paper's claims on object sets the project has never seen: order independence and Archimedes for novel objects.
 
     python benches/generalization.py [--sets 100] [--long-sets 30] [--orders 24] [--first-seed 0]
+                                     [--model extended|paper]
 
 Generated sets (`sim.make_objects`, seeds first-seed.., with `--pairs`: a colour pair, a weight pair, and random
 objects of every shape, sinkers and floaters, in random jars): 8 train and 8 probe objects each, and longer sets of
@@ -178,12 +179,14 @@ def main():
     ap.add_argument("--long-sets", type=count, default=30)
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
+    ap.add_argument("--model", choices=("paper", "extended"), default="extended",
+                    help="the agent's model (the batch answer is the extended model's rules over every pair)")
     a = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     results = {}
     for n_train, n_sets in ((8, a.sets), (24, a.long_sets)):
-        cfg = AgentConfig()
+        cfg = AgentConfig.named(a.model)
         cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
         template = Agent(cfg, batch=1)
         with Step(f"sets of {n_train}", n_sets, unit="set", stream=sys.stderr) as bar:   # stderr: not recorded

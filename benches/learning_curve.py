@@ -1,6 +1,6 @@
 """A lifetime of episodes: does the novel-object error keep falling as the robot explores more objects?
 
-    python benches/learning_curve.py [--sets 20] [--objects 230] [--first-seed 0]
+    python benches/learning_curve.py [--sets 20] [--objects 230] [--first-seed 0] [--model extended|paper]
 
 Generated sets (`sim.make_objects --pairs`, seeds first-seed..) of 230 train objects and 16 probes, measurements and
 outcomes with the simulated robot's noise, each explored in one random order by one agent whose memory is sized
@@ -46,7 +46,7 @@ from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARK
 CHECKS = (8, 16, 32, 64, 128, 230)
 
 
-def life(seed: int, n_train: int, bar) -> dict:
+def life(seed: int, n_train: int, bar, model: str = "extended") -> dict:
     objs = parse_objects(generate(seed, n_train, 16, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
     names = [o.name for o in objs.train]
@@ -55,7 +55,7 @@ def life(seed: int, n_train: int, bar) -> dict:
     rec = [outcomes[names[i]] for i in order]
     pmeas = stack_measurements([probes[o.name]["measurement"] for o in objs.probe])
     truth = torch.tensor([probes[o.name]["archimedes_cm3"] for o in objs.probe])
-    cfg = AgentConfig()
+    cfg = AgentConfig.named(model)
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg)
     x_all, y_all = raw_features(meas), torch.tensor([r["observed_cm3"] for r in rec]).log()
@@ -95,6 +95,7 @@ def main():
     ap.add_argument("--sets", type=count, default=20)   # the median of 5 sets moved with any one of them
     ap.add_argument("--objects", type=at_least(8), default=230)
     ap.add_argument("--first-seed", type=seed, default=0)
+    ap.add_argument("--model", choices=("paper", "extended"), default="extended", help="the agent's model")
     a = ap.parse_args()
     torch.set_num_threads(1)
     t0 = time.perf_counter()
@@ -102,7 +103,7 @@ def main():
     lives = []
     with Step("objects explored", a.sets * a.objects, unit="object", stream=sys.stderr) as bar:   # not recorded
         for i in range(a.sets):
-            lives.append(life(a.first_seed + i, a.objects, bar))
+            lives.append(life(a.first_seed + i, a.objects, bar, a.model))
             print(f"set {a.first_seed + i}: agent " + " ".join(f"{n}:{lives[-1]['agent'][n]:.3f}" for n in checks),
                   flush=True)
     print(f"\n{a.sets} sets of {a.objects} train + 16 probe objects, one order each: median over probes, then over "

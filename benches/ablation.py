@@ -1,0 +1,218 @@
+"""Which part of each model carries which result: the paper and extended models beside their ablations and two peers.
+
+    python benches/ablation.py [--sets 30] [--long-sets 10] [--lives 8] [--orders 24] [--first-seed 0]
+                               [--conditions NAME,...] [--workers N] [--record]
+
+Generated sets (`sim.make_objects --pairs`, seeds first-seed..), measurements and outcomes with the simulated robot's
+noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learned in `--orders` random orders each
+(8 probes), and lives of 230 train objects in one order each (16 probes). Conditions:
+
+- paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
+- extended, extended -rules, extended -prior (its readout without the physics priors);
+- kNN and MLP (benches/generalization.py's peers) on the perceived features the agent has (rgb, log extents, fill,
+  log mass), and kNN+ and MLP+ with the extended model's derived features besides (log volume = fill x extents, and
+  log mass over volume, which decides the fate).
+
+Printed per condition: the median novel-object error |predicted - Archimedes| / Archimedes (median over probes, then
+over (set, order); nothing recalled counts as 100 %) after 8 (sets of 8), 24 (sets of 24) and 8 / 24 / 64 / 230
+objects (lives); the share of sets whose final knowledge is the same in every order; how often colour ends
+irrelevant and how often it ends dominant (of (set, order)); and for the paper model how often weight or size ends
+irrelevant (a physically wrong elimination). Last line:
+`paper_err_24= paper_err_64= paper_err_230= paper_rules_off_ratio_230= paper_order_agreement_8= extended_err_8=
+extended_rules_off_ratio_24=` (err_24 from the sets of 24, err_64 and err_230 from the lives; a ratio is the ablated
+model's error over the model's). `--record` writes the output into BENCHMARKS.md.
+
+Numbers of the models were chosen on seeds 1000 and up; the default seeds (0..) are for reporting.
+"""
+
+from __future__ import annotations
+
+import argparse
+import multiprocessing
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+from aesop_torch.malloc import keep_freed_memory  # noqa: E402
+
+import torch  # noqa: E402
+
+from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
+from aesop_torch.rules import DOMINANT, IRRELEVANT  # noqa: E402
+from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
+from sim.make_objects import generate  # noqa: E402
+from sim.objects import parse_objects  # noqa: E402
+from sim.sensor_model import SensorModel  # noqa: E402
+from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.population import knowledge_keys  # noqa: E402
+from train.physics import cores  # noqa: E402
+from train.progress import Step  # noqa: E402
+from cli_args import count, seed  # noqa: E402
+
+MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper -gating": ("paper", ("gating",)),
+          "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
+          "extended -prior": ("extended", ("prior",))}
+PEERS = ("kNN", "MLP", "kNN+", "MLP+")
+LIFE_CHECKS = (8, 24, 64, 230)
+
+
+def derived_features(meas: dict) -> torch.Tensor:
+    """The peers' inputs with the extended model's derived features besides: log volume, log mass over volume."""
+    vol = (meas["fill"] * meas["extent_cm"].prod(-1)).log()
+    return torch.cat([raw_features(meas), vol[:, None], (meas["mass_g"].log() - vol)[:, None]], 1)
+
+
+def peer_errors(meas, observed, pmeas, truth, orders, n: int, seed_: int) -> dict:
+    """Each peer's (B,) error after the first n objects of each order."""
+    seen, y = orders[:, :n], observed.log()
+    out = {}
+    for plus, feats in ((False, raw_features), (True, derived_features)):
+        x, xq = feats(meas), feats(pmeas)
+        if plus:   # scale the two derived columns like the log extents in knn's distance
+            x, xq = torch.cat([x[:, :8], x[:, 8:] * 2], 1), torch.cat([xq[:, :8], xq[:, 8:] * 2], 1)
+        tag = "+" if plus else ""
+        out["kNN" + tag] = rel_errors(_knn(x[seen], y[seen], xq).exp(), truth)
+        out["MLP" + tag] = rel_errors(mlp(x[seen], y[seen], xq, seed_ * 1000 + n).exp(), truth)
+    return out
+
+
+def _knn(tx, ty, xq):
+    """generalization.knn on any number of features (its scale covers the 8 raw ones; the rest count at 1)."""
+    if tx.shape[-1] == 8:
+        return knn(tx, ty, xq)
+    d = torch.cdist(xq[None].expand(tx.shape[0], -1, -1), tx)
+    k = min(3, tx.shape[1])
+    dist, idx = d.topk(k, dim=-1, largest=False)
+    w = 1.0 / (dist + 1e-6)
+    return (w * ty.gather(1, idx.flatten(1)).view_as(idx)).sum(-1) / w.sum(-1)
+
+
+def world(seed_: int, n_train: int, n_probe: int):
+    objs = parse_objects(generate(seed_, n_train, n_probe, pairs=True))
+    outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed_)
+    names, pnames = [o.name for o in objs.train], [o.name for o in objs.probe]
+    ep = {k: torch.tensor([outcomes[n][k] for n in names]) for k in ("observed_cm3", "goal_before", "goal_after",
+                                                                      "sank")}
+    return (stack_measurements([outcomes[n]["measurement"] for n in names]), ep,
+            stack_measurements([probes[n]["measurement"] for n in pnames]),
+            torch.tensor([probes[n]["archimedes_cm3"] for n in pnames]))
+
+
+def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, checks) -> dict:
+    """One condition on one set in n_orders orders: errors (B,) at each check, final knowledge keys and states."""
+    meas, ep, pmeas, truth = world(seed_, n_train, n_probe)
+    orders = torch.tensor(draw_orders(n_train, str(n_orders), seed_))
+    B = len(orders)
+    if condition in PEERS:
+        errs = {}
+        for n in checks:
+            errs[n] = peer_errors(meas, ep["observed_cm3"], pmeas, truth, orders, n, seed_)[condition]
+        return {"errors": errs}
+    model, ablate = MODELS[condition]
+    cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
+    cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
+    agent = Agent(cfg, batch=B)
+    errs = {}
+    for t in range(n_train):
+        obj = orders[:, t]
+        agent.step({k: v[obj] for k, v in meas.items()}, ep["observed_cm3"][obj], ep["goal_before"][obj],
+                   ep["goal_after"][obj], sank=ep["sank"][obj])
+        if t + 1 in checks:
+            Q = len(truth)
+            probe = agent.select(torch.arange(B).repeat_interleave(Q))
+            p = probe.anticipate({k: v.repeat(B, *([1] * (v.ndim - 1))) for k, v in pmeas.items()})
+            errs[t + 1] = rel_errors(p.expected.view(B, Q), truth)
+    return {"errors": errs, "keys": knowledge_keys(agent.rules.state), "state": agent.rules.state.clone()}
+
+
+def _task(t):
+    torch.set_num_threads(1)
+    return run(*t[1:])
+
+
+def main():
+    keep_freed_memory()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--sets", type=count, default=30, help="sets of 8 train objects")
+    ap.add_argument("--long-sets", type=count, default=10, help="sets of 24 train objects")
+    ap.add_argument("--lives", type=count, default=8, help="lives of 230 train objects, one order each")
+    ap.add_argument("--life-objects", type=count, default=230, help="objects in a life")
+    ap.add_argument("--orders", type=count, default=24)
+    ap.add_argument("--first-seed", type=seed, default=0)
+    ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
+                    help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS]))
+    ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
+    ap.add_argument("--record", action="store_true", help="write the output into BENCHMARKS.md")
+    a = ap.parse_args()
+    conditions = [c.strip() for c in a.conditions.split(",") if c.strip()]
+    if bad := [c for c in conditions if c not in MODELS and c not in PEERS]:
+        ap.error(f"--conditions: unknown {', '.join(map(repr, bad))}")
+    torch.set_num_threads(1)
+    t0 = time.perf_counter()
+    life_checks = tuple(n for n in LIFE_CHECKS if n < a.life_objects) + (a.life_objects,)
+    plan = [("8", a.sets, 8, 8, a.orders, (8,)), ("24", a.long_sets, 24, 8, a.orders, (8, 24)),
+            ("life", a.lives, a.life_objects, 16, 1, life_checks)]
+    # every (condition, set) is a task of its own, run on --workers processes (each a deterministic function of its
+    # arguments: the result does not depend on the worker count); the longest (lives) first
+    tasks = [(kind, c, a.first_seed + i, n_train, n_probe, n_orders, checks)
+             for kind, n_sets, n_train, n_probe, n_orders, checks in reversed(plan) for c in conditions
+             for i in range(n_sets)]
+    res = {(kind, c): [None] * n for kind, n, *_ in plan for c in conditions}
+    with multiprocessing.get_context("fork").Pool(a.workers) as pool, \
+            Step("(condition, set) runs", len(tasks), unit="run", stream=sys.stderr) as bar:
+        for (kind, c, s, *_), r in zip(tasks, pool.imap(_task, tasks)):
+            res[kind, c][s - a.first_seed] = r
+            bar.update(1)
+    print(f"{len(tasks)} runs on {a.workers} process(es): {time.perf_counter() - t0:.0f} s", flush=True)
+
+    def err(kind, c, n):
+        return float(torch.cat([r["errors"][n] for r in res[kind, c]]).median())
+
+    cols = [("8", 8, "8 (sets of 8)"), ("24", 24, "24 (sets of 24)")] + [("life", n, f"{n} (lives)")
+                                                                           for n in life_checks]
+    print(f"\nmedian novel-object error after n objects; seeds {a.first_seed}..; {a.sets} sets of 8 and "
+          f"{a.long_sets} of 24 in {a.orders} orders, {a.lives} lives of {a.life_objects}")
+    print(f"{'condition':<17}" + "".join(f"{h:>17}" for _, _, h in cols))
+    for c in conditions:
+        print(f"{c:<17}" + "".join(f"{err(k, c, n):>17.4f}" for k, n, _ in cols))
+    print("\nknowledge (of (set, order)): same in every order = share of sets; C/W/S = colour / weight / size")
+    print(f"{'condition':<17}{'same (8)':>10}{'same (24)':>10}{'C irrel.':>10}{'C dom.':>10}{'W irrel.':>10}"
+          f"{'S irrel.':>10}   (C, W and S over the sets of 8 / of 24 / lives)")
+    for c in conditions:
+        if c in PEERS:
+            continue
+        same = [sum(len(set(r["keys"])) == 1 for r in res[k, c]) / len(res[k, c]) for k in ("8", "24")]
+
+        def share(p, code):
+            parts = [torch.cat([r["state"][:, p] for r in res[k, c]]) for k in ("8", "24", "life")]
+            return "/".join(f"{float((x == code).float().mean()):.2f}" for x in parts)
+        print(f"{c:<17}{same[0]:>10.3f}{same[1]:>10.3f}  {share(0, IRRELEVANT)}  {share(0, DOMINANT)}  "
+              f"{share(3, IRRELEVANT)}  {share(2, IRRELEVANT)}")
+    print(f"{time.perf_counter() - t0:.0f} s")
+
+    def ratio(c, base, kind, n):
+        return err(kind, c, n) / max(err(kind, base, n), 1e-12)
+    line = {}
+    if "paper" in conditions:
+        line["paper_err_24"] = err("24", "paper", 24)
+        line["paper_err_64"] = err("life", "paper", 64) if 64 in life_checks else float("nan")
+        line["paper_err_230"] = err("life", "paper", life_checks[-1])
+        if "paper -rules" in conditions:
+            line["paper_rules_off_ratio_230"] = ratio("paper -rules", "paper", "life", life_checks[-1])
+        line["paper_order_agreement_8"] = sum(len(set(r["keys"])) == 1 for r in res["8", "paper"]) / a.sets
+    if "extended" in conditions:
+        line["extended_err_8"] = err("8", "extended", 8)
+        if "extended -rules" in conditions:
+            line["extended_rules_off_ratio_24"] = ratio("extended -rules", "extended", "24", 24)
+    print(" ".join(f"{k}={v:.4f}" for k, v in line.items()))
+
+
+if __name__ == "__main__":
+    if "--record" in sys.argv:
+        from record import recorded
+        with recorded("ablation"):
+            main()
+    else:
+        main()
