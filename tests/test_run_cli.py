@@ -74,6 +74,19 @@ def test_bad_flags_are_refused(tmp_path):
         assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("args, words", [
+    (["--model", "bayes"], ["--model", "bayes"]),
+    (["--ablate", "prior"], ["--ablate prior", "paper", "rules, gating"]),            # the paper model has no prior
+    (["--model", "extended", "--ablate", "memory"], ["--ablate memory", "extended", "prior"]),
+])
+def test_a_model_or_ablation_it_does_not_have_is_refused(tmp_path, args, words):
+    r = run(*args, "--out", str(tmp_path / "o"))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert all(w in lines[0] for w in words), lines[0]
+    assert not (tmp_path / "o").exists()
+
+
 def test_resume_without_checkpoint_and_occupied_out_are_refused(tmp_path):
     r = run("--out", str(tmp_path / "none"), "--resume")
     assert r.returncode == 2 and "no checkpoint" in r.stderr
