@@ -75,14 +75,15 @@ def test_objects_file_trials_and_pool():
         parse_objects({**OBJECTS, "pool": OBJECTS["pool"] + [OBJECTS["train"][0]]})
 
 
-@pytest.fixture(scope="module")
-def explored():
-    """One order's agent after the three train objects, closed form (every object displaces its Archimedes volume)."""
+@pytest.fixture(scope="module", params=["paper", "extended"])
+def explored(request):
+    """One order's agent after the three train objects, closed form (every object displaces its Archimedes volume);
+    each model."""
     objs = parse_objects(OBJECTS)
     every = parse_objects({**OBJECTS, "train": OBJECTS["train"] + OBJECTS["pool"], "pool": [], "trials": []})
     outcomes, _ = closed_form_outcomes(every, reachable_above_cm3=reach_cm3(objs.jar))
     exp = Experiment([o["name"] for o in OBJECTS["train"]], [], [[0, 1, 2]],
-                     config=AgentConfig(som_samples=2000, som_epochs=10))
+                     config=AgentConfig.named(request.param, som_samples=2000, som_epochs=10))
     exp.outcomes = {n: outcomes[n] for n in exp.train_names}
     while not exp.done:
         exp.step(lambda name, b, t: outcomes[name])
