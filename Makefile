@@ -11,12 +11,15 @@ run: $(VENV)/.installed
 test: $(VENV)/.installed
 	$(PY) -m pytest
 
-# Every bench in turn (each rewrites its block of BENCHMARKS.md); the first that fails stops the rest, and make fails.
+# Every bench in turn, with --record: each rewrites its block of BENCHMARKS.md (and generalization.py and
+# trial_strip.py their tracked PNGs; a bench run by hand without --record rewrites nothing tracked). The first that
+# fails stops the rest, and make fails. record.py, cli_args.py and memory_reference.py are modules the benches import.
 # MiniSom is the SOM bench's peer, pinned: its defaults (decay schedules) are what that bench matches.
 # episode_speed.py also runs the default experiment at an older commit (git worktree) for its speed ratio.
+BENCH_MODULES := benches/record.py benches/cli_args.py benches/memory_reference.py
 bench: $(VENV)/.installed
 	$(PY) -m pip install -q "minisom==2.3.6"
-	set -e; for b in $(filter-out benches/record.py,$(wildcard benches/*.py)); do echo "== $$b"; $(PY) $$b; done
+	set -e; for b in $(filter-out $(BENCH_MODULES),$(wildcard benches/*.py)); do echo "== $$b"; $(PY) $$b --record; done
 
 $(VENV)/.installed: pyproject.toml
 	test -x $(PY) || python3 -m venv $(VENV)

@@ -1,6 +1,6 @@
 """The physics' speed: one headless drop episode, the water's share of a step, and the default run against a commit.
 
-    python benches/episode_speed.py [--baseline COMMIT] [--runs N]
+    python benches/episode_speed.py [--baseline COMMIT] [--runs N] [--record]
 
 1. The world's build time, one drop episode (the paper's heavy red cylinder, pick to settle) and a goal check.
 2. Per physics step of that episode: the water model (`Water.step`) beside pybullet's own `stepSimulation`.
@@ -12,7 +12,8 @@
    (it is not against 19ce05e, which played no goal trials), with the 1-minute load average while they ran: the
    ratio depends on the machine's other jobs (19ce05e needs more CPU, so it loses more on a busy machine). Skipped
    (said so) when git or the commit is not available.
-Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`.
+Printed, never asserted; the last line is `episode_wall_s=X run_ratio=Y`. `--record` writes the output into
+BENCHMARKS.md.
 """
 
 import argparse
@@ -36,8 +37,8 @@ import torch  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from sim.water import Water  # noqa: E402
 from sim.world import World  # noqa: E402
-from cli_args import count  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import count, record_flag  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 from train.physics import cores  # noqa: E402
 
 
@@ -126,11 +127,12 @@ def against(commit: str, runs: int) -> float | None:
 
 
 def main():
-    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
-    ap = argparse.ArgumentParser()
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--baseline", default="19ce05e", help="commit to run the default experiment against")
     ap.add_argument("--runs", type=count, default=3, help="default runs of each tree (medians)")
+    record_flag(ap)
     args = ap.parse_args()
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)   # as in the runner's workers
     print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}")
     wall = episode()
@@ -139,5 +141,4 @@ def main():
 
 
 if __name__ == "__main__":
-    with recorded("episode_speed"):
-        main()
+    run_main("episode_speed", main)

@@ -1,7 +1,7 @@
 """The paper's claims on object sets the project has never seen: order independence and Archimedes for novel objects.
 
     python benches/generalization.py [--sets 100] [--long-sets 30] [--orders 24] [--first-seed 0]
-                                     [--model extended|paper]
+                                     [--model extended|paper] [--out PNG] [--record]
 
 Generated sets (`sim.make_objects`, seeds first-seed.., with `--pairs`: a colour pair, a weight pair, and random
 objects of every shape, sinkers and floaters, in random jars): 8 train and 8 probe objects each, and longer sets of
@@ -19,9 +19,12 @@ objects of every shape, sinkers and floaters, in random jars): 8 train and 8 pro
   ([rgb, log extents, fill, log mass] -> log cm^3); and a reference that is told what the agent must learn, the
   law's form and each probe's true fate (a least-squares power law of measured mass and volume per fate, `law_form`):
   what the same episodes allow a learner that only has to fit the slopes, not a peer;
-- a PNG of the learning curves (benches/generalization.png).
+- a PNG of the learning curves: `--out PNG`, by default benches/generalization.png (tracked: the README shows it)
+  with --record and the system's temporary directory (/tmp/generalization.png) without it.
 Both agreement figures are printed for the sets of 24 too. Last line: `sets_order_independent=F
 sequential_equals_batch=F median_error_8=E median_error_24=E sets_order_independent_24=F sequential_equals_batch_24=F`.
+`--record` writes the output into BENCHMARKS.md and the curves into benches/generalization.png; without it no
+tracked file is written.
 
 The model's numbers were chosen on sets of seeds 1000 and up; the default seeds here (0..) were never looked at
 while choosing them.
@@ -33,6 +36,7 @@ import argparse
 import math
 import statistics
 import sys
+import tempfile
 import time
 from collections import Counter
 from pathlib import Path
@@ -51,10 +55,10 @@ from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.population import knowledge_keys  # noqa: E402
 from train.progress import Step  # noqa: E402
-from cli_args import count, seed  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import count, record_flag, seed  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
-PNG = Path(__file__).with_name("generalization.png")
+PNG = Path(__file__).with_name("generalization.png")   # tracked: rewritten only with --record
 
 
 def raw_features(meas: dict) -> torch.Tensor:
@@ -173,7 +177,6 @@ def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool
 
 
 def main():
-    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sets", type=count, default=100)
     ap.add_argument("--long-sets", type=count, default=30)
@@ -181,7 +184,12 @@ def main():
     ap.add_argument("--first-seed", type=seed, default=0)
     ap.add_argument("--model", choices=("paper", "extended"), default="extended",
                     help="the agent's model (the batch answer is the extended model's rules over every pair)")
+    ap.add_argument("--out", type=Path, help=f"the curves' PNG (default: {PNG.relative_to(ROOT)} with --record, "
+                                             f"else {Path(tempfile.gettempdir()) / PNG.name})")
+    record_flag(ap, "BENCHMARKS.md and the curves into " + str(PNG.relative_to(ROOT)))
     a = ap.parse_args()
+    png = a.out or (PNG if a.record else Path(tempfile.gettempdir()) / PNG.name)
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     results = {}
@@ -227,14 +235,15 @@ def main():
         print(f"{tag:>9} {c['agent'][t]:>8.3f} {c['knn'][t]:>8.3f} {c['mlp'][t]:>8.3f}   {c['law'][t]:>8.3f}")
     ahead = all(curves[n]["agent"][t] < min(curves[n]["knn"][t], curves[n]["mlp"][t]) for n, t in rows)
     print(f"agent ahead of both peers at every episode count: {ahead}")
-    _plot(curves)
-    print(f"curves: {PNG.relative_to(ROOT)}; {time.perf_counter() - t0:.0f} s")
+    _plot(curves, png)
+    print(f"curves: {png.resolve().relative_to(ROOT) if png.resolve().is_relative_to(ROOT) else png}; "
+          f"{time.perf_counter() - t0:.0f} s")
     print(f"sets_order_independent={same:.3f} sequential_equals_batch={equal:.3f} "
           f"median_error_8={curves[8]['agent'][7]:.3f} median_error_24={curves[24]['agent'][23]:.3f} "
           f"sets_order_independent_24={same_24:.3f} sequential_equals_batch_24={equal_24:.3f}")
 
 
-def _plot(curves: dict) -> None:
+def _plot(curves: dict, png: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -248,9 +257,8 @@ def _plot(curves: dict) -> None:
         ax.set_yscale("log")
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(PNG, dpi=100)
+    fig.savefig(png, dpi=100)
 
 
 if __name__ == "__main__":
-    with recorded("generalization"):
-        main()
+    run_main("generalization", main)

@@ -1,6 +1,6 @@
 """A lifetime of episodes: does the novel-object error keep falling as the robot explores more objects?
 
-    python benches/learning_curve.py [--sets 20] [--objects 230] [--first-seed 0] [--model extended|paper]
+    python benches/learning_curve.py [--sets 20] [--objects 230] [--first-seed 0] [--model extended|paper] [--record]
 
 Generated sets (`sim.make_objects --pairs`, seeds first-seed..) of 230 train objects and 16 probes, measurements and
 outcomes with the simulated robot's noise, each explored in one random order by one agent whose memory is sized
@@ -13,7 +13,7 @@ floor it can fall no further, so two more columns say whether learning goes on: 
 above each probe's own floor (mean over probes, median over sets) and how many probes are more than 2 points
 above it. And, since a median over sets can rise while most sets fall (or the reverse), each set's own curve:
 how many sets' errors fell and rose since the previous count, and the median over sets of that change. Last line:
-`median_error_8=E ... median_error_230=E`.
+`median_error_8=E ... median_error_230=E`. `--record` writes the output into BENCHMARKS.md.
 
 The model's numbers were chosen on sets of seeds 1000 and up; the default seeds here (0..) were never looked at
 while choosing them.
@@ -40,8 +40,8 @@ from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.progress import Step  # noqa: E402
-from cli_args import at_least, count, seed  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import at_least, count, record_flag, seed  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
 CHECKS = (8, 16, 32, 64, 128, 230)
 
@@ -90,13 +90,14 @@ def _moves(change: list[float]) -> str:
 
 
 def main():
-    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--sets", type=count, default=20)   # the median of 5 sets moved with any one of them
     ap.add_argument("--objects", type=at_least(8), default=230)
     ap.add_argument("--first-seed", type=seed, default=0)
     ap.add_argument("--model", choices=("paper", "extended"), default="extended", help="the agent's model")
+    record_flag(ap)
     a = ap.parse_args()
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     checks = [n for n in CHECKS if n < a.objects] + [a.objects]
@@ -127,5 +128,4 @@ def main():
 
 
 if __name__ == "__main__":
-    with recorded("learning_curve"):
-        main()
+    run_main("learning_curve", main)

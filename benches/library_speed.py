@@ -1,13 +1,16 @@
 """The library's use of a finished run: load a checkpoint, predict for a new object.
 
-    python benches/library_speed.py
+    python benches/library_speed.py [--record]
 
 Prints the median over repeats of `load_experiment("checkpoints/default.pt")` (imports already done), of the same in
 a fresh interpreter (imports included: what a user's script pays once), and of `Experiment.predict` for one object
-(4 agents, one per order; with torch's default threads and with one), beside the peer: the load as it was before (the agents re-trained their property maps,
-which the checkpoint then overwrote). The last line is `load_s=X predict_ms=Y`. Printed, never asserted.
+(4 agents, one per order; it runs on one torch thread), beside the peers: the load as it was before (the agents
+re-trained their property maps, which the checkpoint then overwrote) and the agents' predict on torch's default
+threads (what `Experiment.predict` ran on before). The last line is `load_s=X predict_ms=Y`. Printed, never asserted.
+`--record` writes the output into BENCHMARKS.md.
 """
 
+import argparse
 import datetime
 import statistics
 import subprocess
@@ -22,8 +25,9 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 import torch  # noqa: E402
 
 from aesop_torch import Agent  # noqa: E402
-from train.experiment import Experiment, load_experiment  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import record_flag  # noqa: E402
+from train.experiment import Experiment, load_experiment, stack_measurements  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 from train.physics import cores  # noqa: E402
 
 CKPT = ROOT / "checkpoints" / "default.pt"
@@ -42,6 +46,9 @@ def median_s(fn, repeats: int) -> float:
 
 
 def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    record_flag(ap)
+    ap.parse_args()
     keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     load_experiment(CKPT)   # warm-up: first-call costs out of the figure
     load_s = median_s(lambda: load_experiment(CKPT), 15)
@@ -52,10 +59,9 @@ def main():
     exp.predict(objects[0])
     per_object = [median_s(lambda m=m: exp.predict(m), 30) for m in objects]
     predict_ms = 1e3 * statistics.median(per_object)
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)   # 4 agents are small tensors: a second thread mostly waits for a busy core
-    one_thread_ms = 1e3 * statistics.median([median_s(lambda m=m: exp.predict(m), 30) for m in objects])
-    torch.set_num_threads(threads)
+    # the peer: what predict ran before it took one thread, the agents' predict on torch's default threads
+    batched = [stack_measurements([m] * len(exp.orders)) for m in objects]
+    default_threads_ms = 1e3 * statistics.median([median_s(lambda b=b: exp.agent.predict(b), 30) for b in batched])
 
     state = torch.load(CKPT, weights_only=True)["experiment"]
 
@@ -72,10 +78,10 @@ def main():
           f"{old_s * 1e3:.1f} ms)")
     print(f"  in a fresh process    {statistics.median(cold) * 1e3:8.1f} ms  (imports included, median of 3)")
     print(f"predict, one object     {predict_ms:8.2f} ms  (median over {len(objects)} objects of the median of 30; "
-          f"{len(exp.orders)} agents at once; {one_thread_ms:.2f} ms on 1 torch thread)")
+          f"{len(exp.orders)} agents at once, 1 torch thread; on {torch.get_num_threads()} threads as before: "
+          f"{default_threads_ms:.2f} ms)")
     print(f"load_s={load_s:.4f} predict_ms={predict_ms:.3f}")
 
 
 if __name__ == "__main__":
-    with recorded("library_speed"):
-        main()
+    run_main("library_speed", main)

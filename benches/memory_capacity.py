@@ -26,12 +26,14 @@ worst and median. Then the graded recall a prediction needs: for novel objects (
 recalled episode the stored object nearest to it (the highest hub match)? (The agent's sheet layout and the cue's
 power were chosen on sets of seeds 1000 and up; seeds 0-9 were not looked at while choosing them.)
 
-Run: .venv/bin/python benches/memory_capacity.py [--throughput [--default-malloc]]   (--throughput: that section
-alone, not recorded; --default-malloc: without aesop_torch.malloc.keep_freed_memory)
+Run: .venv/bin/python benches/memory_capacity.py [--throughput [--default-malloc]] [--record]   (--throughput: that
+section alone, never recorded; --default-malloc: without aesop_torch.malloc.keep_freed_memory; --record: the whole
+bench's output into BENCHMARKS.md)
 """
 
 from __future__ import annotations
 
+import argparse
 import statistics
 import sys
 import time
@@ -45,8 +47,9 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig  # noqa: E402
 from aesop_torch.memory import EpisodicMemory, MemoryConfig, k_winners  # noqa: E402
+from cli_args import record_flag  # noqa: E402
 from memory_reference import DenseEpisodicMemory  # noqa: E402   # the recall of commit 59ec298, a peer
-from record import recorded   # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from record import run_main   # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
 R, C, OBJ, N = 20, 50, 1, 1000
 COUNTS = list(range(25, 501, 25))
@@ -402,12 +405,26 @@ def main():
           f"agent_capacity_episodes={agent_capacity}")
 
 
+def parse_args() -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    ap.add_argument("--throughput", action="store_true", help="the recall throughput section alone (not recorded)")
+    ap.add_argument("--default-malloc", action="store_true",
+                    help="with --throughput: glibc's malloc as it comes (no keep_freed_memory), to see what it costs")
+    record_flag(ap)
+    a = ap.parse_args()
+    if a.default_malloc and not a.throughput:
+        ap.error("--default-malloc applies to --throughput only")
+    if a.record and a.throughput:
+        ap.error("--record records the whole bench, not --throughput alone")
+    return a
+
+
 if __name__ == "__main__":
-    if "--throughput" in sys.argv[1:]:
-        if "--default-malloc" not in sys.argv[1:]:   # --default-malloc: glibc as it comes, to see what it costs
+    args = parse_args()
+    if args.throughput:
+        if not args.default_malloc:
             keep_freed_memory()
-        with recorded("memory_capacity", enabled=False), torch.no_grad():
+        with torch.no_grad():
             throughput_section()
     else:
-        with recorded("memory_capacity"):
-            main()
+        run_main("memory_capacity", main)

@@ -121,3 +121,9 @@ class DenseEpisodicMemory(EpisodicMemory):
         fixed = torch.ones(B, dtype=torch.bool, device=cue.device)
         fixed[idx] = False
         return s.bool(), fixed
+
+
+if __name__ == "__main__":
+    import argparse
+    argparse.ArgumentParser(description="The episodic memory's recall before it was made fast, a peer that "
+                                        "benches/memory_capacity.py imports: nothing to run.").parse_args()

@@ -1,6 +1,6 @@
 """What the robot perceives against the engine's truth, over generated objects in several poses on the stand.
 
-    python benches/perception.py [--per-pose N] [--seed S] [--fit]
+    python benches/perception.py [--per-pose N] [--seed S] [--fit] [--record]
 
 Per shape (cylinder, cube, sphere, box) and pose (upright; turned about z by a random angle; a box also lying on
 its side, turned): N objects (default 10) with random sides of 1.5 to 9 cm, random colours and masses of 10 to
@@ -13,6 +13,7 @@ object. The last line is `extent_ok=F fill_ok=F s_per_object=T` (fractions of ob
 
 --fit also drops a handful of objects into the jar (the default set's, full physics) and prints the noise model
 (sim/sensor_model.py SensorModel) these errors imply. Printed, never asserted: times depend on the machine.
+`--record` writes the output into BENCHMARKS.md; only the default run (10 per pose, seed 0, no --fit) is recorded.
 """
 
 import argparse
@@ -28,8 +29,8 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 import numpy as np  # noqa: E402
 import pybullet as p  # noqa: E402
 
-from cli_args import count, seed  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import count, record_flag, seed  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 from sim.episode import _take  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects  # noqa: E402
 from sim.oracle import truth  # noqa: E402
@@ -175,6 +176,8 @@ if __name__ == "__main__":
     ap.add_argument("--per-pose", type=count, default=10, help="objects per shape and pose (default 10)")
     ap.add_argument("--seed", type=seed, default=0)
     ap.add_argument("--fit", action="store_true", help="also drop the default objects and print the noise model")
+    record_flag(ap, "BENCHMARKS.md (the default run only)")
     a = ap.parse_args()
-    with recorded("perception", enabled=(a.per_pose == 10 and a.seed == 0 and not a.fit)):
-        main(a)
+    if a.record and (a.per_pose, a.seed, a.fit) != (10, 0, False):
+        ap.error("--record records the default run only (--per-pose 10, --seed 0, no --fit)")
+    run_main("perception", lambda: main(a))

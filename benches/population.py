@@ -1,7 +1,7 @@
 """Throughput of train.population (every order at once) beside the plain trie, and the wall time of
 `train/run.py --orders all` for 8 and 9 objects.
 
-    python benches/population.py [--skip-run] [--repeats R]
+    python benches/population.py [--skip-run] [--repeats R] [--record]
 
 Part 1 runs populations of 1, 100, 10,000 random orders and all 40,320 orders of the default 8 objects through
 `run_population`, with closed-form outcomes (Archimedes, measurements from the object specs: no physics): ours
@@ -13,9 +13,11 @@ whether both gave the same knowledge and rounded probe errors for every order. P
 in detail, the population, summary and figure, goal trials) in a subprocess for the default file and for the
 default file with a ninth train object (a blue heavy sphere: 9! = 362,880 orders), and prints the wall times and peak
 memory. Last line: `all_orders_wall_s=X nine_objects_wall_s=Y` (0 with --skip-run).
-Printed, never asserted: speed depends on the machine and on what else runs on it.
+Printed, never asserted: speed depends on the machine and on what else runs on it. `--record` writes the output into
+BENCHMARKS.md (whole runs only: not with --skip-run).
 """
 
+import argparse
 import json
 import resource
 import statistics
@@ -33,7 +35,8 @@ from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders  # noqa: E402
 from train.population import run_population  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import count, record_flag  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
 POPULATIONS = ("1", "100", "10000", "all")
 NINTH = {"name": "blue_heavy_sphere", "shape": "sphere", "color": "blue", "dims_cm": [5.5], "mass_g": 350}
@@ -84,11 +87,16 @@ def timed_run(args: list, tmp: str) -> float:
 
 
 def main():
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--skip-run", action="store_true", help="part 1 alone, without the train/run.py runs")
+    ap.add_argument("--repeats", type=count, default=3, help="runs of each population, alternately (medians)")
+    record_flag(ap, "BENCHMARKS.md (whole runs only)")
+    a = ap.parse_args()
+    if a.record and a.skip_run:
+        ap.error("--record records whole runs only, not --skip-run")
     keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
-    argv = sys.argv[1:]
-    repeats = int(argv[argv.index("--repeats") + 1]) if "--repeats" in argv else 3
-    population_section(repeats)
-    if "--skip-run" in argv:
+    population_section(a.repeats)
+    if a.skip_run:
         print("all_orders_wall_s=0 nine_objects_wall_s=0")
         return
     with tempfile.TemporaryDirectory() as tmp:
@@ -103,5 +111,4 @@ def main():
 
 
 if __name__ == "__main__":
-    with recorded("population", enabled="--skip-run" not in sys.argv[1:]):   # only whole runs are recorded
-        main()
+    run_main("population", main)

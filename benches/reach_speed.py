@@ -13,13 +13,15 @@ its time counts the IK calls only (setting up and checking are free for it; ours
 Our palm (HAND_LINK, what the world uses) has no peer: no other solver here can target it.
 Medians over SEEDS target sets x REPEATS repeats.
 
-    .venv/bin/python benches/reach_speed.py
+    .venv/bin/python benches/reach_speed.py [--record]
 
-Last line: reach_speedup_1=X reach_speedup_8=Y (ours / pybullet, wrist, 1 and 8 starts).
+Last line: reach_speedup_1=X reach_speedup_8=Y (ours / pybullet, wrist, 1 and 8 starts). `--record` writes the
+output into BENCHMARKS.md.
 """
 
 from __future__ import annotations
 
+import argparse
 import datetime
 import statistics
 import sys
@@ -36,7 +38,8 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from sim.kinematics import ArmKinematics, IKConfig  # noqa: E402
 from sim.robot import HAND_PARENT_LINK, load_icub, quiet_c_output  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import record_flag  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 from train.physics import cores  # noqa: E402
 
 N_TARGETS = 1000
@@ -74,6 +77,9 @@ def median_run(fn) -> tuple[float, torch.Tensor]:
 
 
 def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    record_flag(ap)
+    ap.parse_args()
     keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}, 1 thread; {N_TARGETS} targets per "
@@ -154,5 +160,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    with recorded("reach_speed"):
-        main()
+    run_main("reach_speed", main)

@@ -5,6 +5,11 @@ block between `<!-- bench:name -->` and `<!-- /bench:name -->` in BENCHMARKS.md 
 headed by the command, the date, the core count and the torch version. So the file always holds the figures of the
 last complete run of every bench, never a half-written one: a failed run leaves the file as it was, and the file
 is replaced by rename. The curated table at the top of BENCHMARKS.md is written by hand from these blocks.
+
+A bench records only when asked: `run_main(name, main)` runs main() inside `recorded(name)` when the command line
+has `--record` (each bench's argparse accepts that flag; `make bench` passes it), and plainly otherwise, so trying a
+bench never rewrites a tracked file. This module is imported by the benches, not run: `python benches/record.py`
+does nothing.
 """
 
 from __future__ import annotations
@@ -15,8 +20,6 @@ import io
 import os
 import sys
 from pathlib import Path
-
-from train.physics import cores
 
 BENCHMARKS_MD = Path(__file__).resolve().parents[1] / "BENCHMARKS.md"
 SECTION = "## Latest output of each benchmark"
@@ -37,6 +40,7 @@ class _Tee(io.TextIOBase):
 
 
 def block(name: str, command: str, output: str, when: datetime.date, torch_version: str) -> str:
+    from train.physics import cores   # here, not at the top: `python benches/record.py` has no root on sys.path
     return (f"<!-- bench:{name} -->\n`{command}` on {when.isoformat()}, {cores()} cores, torch {torch_version}:\n\n"
             f"```\n{output.rstrip()}\n```\n<!-- /bench:{name} -->")
 
@@ -74,3 +78,19 @@ def recorded(name: str, path: Path = BENCHMARKS_MD, enabled: bool = True):
     tmp.write_text(new)
     os.replace(tmp, path)
     print(f"(recorded in {path.name})", file=sys.stderr)   # stdout's last line stays the bench's name=value
+
+
+def run_main(name: str, main, path: Path = BENCHMARKS_MD) -> None:
+    """main() run plainly or, when the command line has `--record`, inside recorded(name, path). Parses nothing: the
+    bench's own argparse, run in main(), accepts --record (store_true), answers --help and refuses a bad flag (or a
+    partial run with --record) before anything is measured, so nothing is recorded then."""
+    # argparse takes an unambiguous prefix (--rec) for --record (an ambiguous one fails in main() before anything)
+    record = any(len(arg) > 2 and "--record".startswith(arg) for arg in sys.argv[1:])
+    with recorded(name, path, enabled=record):
+        main()
+
+
+if __name__ == "__main__":
+    import argparse
+    argparse.ArgumentParser(description="The benches' record of their output in BENCHMARKS.md: a module they "
+                                        "import, nothing to run.").parse_args()

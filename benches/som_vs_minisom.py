@@ -14,9 +14,10 @@ over SEEDS seeds x REPEATS repeats (ours and the peer alternately); QE and TE (M
 MiniSom for every codebook) are medians over the seeds. Speed is compared where QE and TE agree; the last rows put
 the batch and online results side by side. Last line: `online_speedup=X batch_speedup=Y` for the 30x30 map.
 Needs `pip install minisom` (a benchmark-only dependency; `make bench` installs it).
-Run: python benches/som_vs_minisom.py
+Run: python benches/som_vs_minisom.py [--record]   (--record writes the output into BENCHMARKS.md)
 """
 
+import argparse
 import datetime
 import os
 import statistics
@@ -33,16 +34,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.som import SelfOrganizingMap, SOMConfig  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import record_flag  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 from train.physics import cores  # noqa: E402
 
-try:
-    from minisom import MiniSom
-except ImportError:
-    sys.exit("benches/som_vs_minisom.py needs MiniSom: pip install minisom")
-
-keep_freed_memory()   # for the peer in this process too (aesop_torch/malloc.py)
-torch.set_num_threads(1)   # MiniSom's numpy work on these small arrays runs on one core too
+MiniSom = None   # the peer's class, imported by main() once the arguments are read (--help needs no MiniSom)
 SAMPLES, UPDATES, EPOCHS = 5000, 50_000, 10
 SEEDS, REPEATS = (0, 1, 2), 3
 LEARNING_RATE = 0.5        # MiniSom's default
@@ -157,9 +153,22 @@ def run(side: int) -> tuple[float, float]:
     return b / a, e / c
 
 
+def main() -> None:
+    global MiniSom
+    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
+    record_flag(ap)
+    ap.parse_args()
+    try:
+        from minisom import MiniSom
+    except ImportError:
+        sys.exit("benches/som_vs_minisom.py needs MiniSom: pip install minisom")
+    keep_freed_memory()   # for the peer in this process too (aesop_torch/malloc.py)
+    torch.set_num_threads(1)   # MiniSom's numpy work on these small arrays runs on one core too
+    print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}, 1 thread, float64")
+    run(10)
+    online, batch = run(30)
+    print(f"online_speedup={online:.2f} batch_speedup={batch:.2f}")
+
+
 if __name__ == "__main__":
-    with recorded("som_vs_minisom"):
-        print(f"{datetime.date.today()}, {cores()} cores, torch {torch.__version__}, 1 thread, float64")
-        run(10)
-        online, batch = run(30)
-        print(f"online_speedup={online:.2f} batch_speedup={batch:.2f}")
+    run_main("som_vs_minisom", main)

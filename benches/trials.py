@@ -1,6 +1,6 @@
 """Goal trials after exploration: does the learned model pick what reaches the ball in the fewest drops?
 
-    python benches/trials.py [--seeds 20] [--orders 8] [--sets 100] [--stands 4] [--first-seed 0]
+    python benches/trials.py [--seeds 20] [--orders 8] [--sets 100] [--stands 4] [--first-seed 0] [--record]
 
 1. The crows' object tasks (sim/tasks/crows.json: sinking vs floating of the same size, solid vs hollow of the same
    look, large vs small sinker; Jelbert et al. 2014): for each seed (the maps' development and the senses' noise)
@@ -16,7 +16,8 @@
 Outcomes without physics (sim.trial.closed_form_drop: the objects' displacements, with the simulated robot's noise
 from sim.sensor_model, add up in the jar; the ball is reachable after sim.trial.reach_cm3). Each trial starts from
 the state after the exploration, learning on within it. Nothing of the model was chosen on these seeds.
-Last line: `first_choice_correct_min=F generated_fewest=F agent_drops=D random_drops=D`.
+Last line: `first_choice_correct_min=F generated_fewest=F agent_drops=D random_drops=D`. `--record` writes the
+output into BENCHMARKS.md.
 """
 
 from __future__ import annotations
@@ -43,8 +44,8 @@ from sim.trial import (closed_form_drop, drops_to_goal, heaviest_first, optimal_
 from train.experiment import Experiment, closed_form_outcomes, draw_orders  # noqa: E402
 from train.progress import Step  # noqa: E402
 from train.trials import roomy_copy, run_trials  # noqa: E402
-from cli_args import count, seed  # noqa: E402
-from record import recorded  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current
+from cli_args import count, record_flag, seed  # noqa: E402
+from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
 CROWS = ROOT / "sim" / "tasks" / "crows.json"
 
@@ -124,14 +125,15 @@ def generated(seeds: range, orders: int, stands: int) -> dict:
 
 
 def main(argv=None) -> None:
-    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--seeds", type=count, default=20, help="seeds of the crows' tasks (each: maps, noise, orders)")
     ap.add_argument("--orders", type=count, default=8, help="random orders of the exploration per seed or set")
     ap.add_argument("--sets", type=count, default=100, help="generated object sets")
     ap.add_argument("--stands", type=count, default=4, help="trials drawn per generated set")
     ap.add_argument("--first-seed", type=seed, default=0)
+    record_flag(ap)
     a = ap.parse_args(argv)
+    keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     s = crows(range(a.first_seed, a.first_seed + a.seeds), a.orders)
@@ -158,5 +160,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    with recorded("trials"):
-        main()
+    run_main("trials", main)

@@ -55,3 +55,34 @@ def test_a_disabled_record_prints_but_writes_nothing(tmp_path, capsys):
     with record.recorded("alpha", md, enabled=False):
         print("alpha_rate=0")
     assert md.read_text() == HEAD and capsys.readouterr().out == "alpha_rate=0\n"
+
+
+def bench_main():
+    print("alpha_rate=5")
+
+
+@pytest.mark.parametrize("argv, written", [([], False), (["--sets", "1"], False), (["--record"], True),
+                                           (["--sets", "1", "--rec"], True)])   # argparse's prefix for --record
+def test_run_main_records_only_with_record(tmp_path, monkeypatch, capsys, argv, written):
+    md = tmp_path / "BENCHMARKS.md"
+    md.write_bytes(HEAD.encode())
+    monkeypatch.setattr("sys.argv", ["benches/alpha.py", *argv])
+    record.run_main("alpha", bench_main, md)
+    assert capsys.readouterr().out == "alpha_rate=5\n"   # printed either way
+    assert ("alpha_rate=5" in md.read_text()) == written
+    if not written:
+        assert md.read_bytes() == HEAD.encode() and list(tmp_path.iterdir()) == [md]
+
+
+def test_run_main_records_nothing_when_main_stops(tmp_path, monkeypatch):
+    """--help or a bad flag with --record: argparse exits inside main(), nothing is written."""
+    md = tmp_path / "BENCHMARKS.md"
+    md.write_text(HEAD)
+    monkeypatch.setattr("sys.argv", ["benches/alpha.py", "--record", "--help"])
+
+    def main():
+        print("usage: alpha.py [-h] [--record]")
+        raise SystemExit(0)
+    with pytest.raises(SystemExit):
+        record.run_main("alpha", main, md)
+    assert md.read_text() == HEAD

@@ -256,12 +256,15 @@ def _measurement_ok(m) -> bool:
 def _agent_problem(e: dict) -> str | None:
     import torch
 
-    from aesop_torch.agent import AgentConfig
-    from train.experiment import Experiment
+    from aesop_torch.agent import Agent, AgentConfig
     try:
+        # the agents as train.experiment.Experiment builds them (its __post_init__: seed, buffers sized to the train
+        # objects), without importing it (it imports this module)
         config = AgentConfig.from_dict(e["config"])
-        like = Experiment(e["train_names"], e["probe_names"], e["orders"], e["seed"], e["physics"], config,
-                          develop=False).agent.state_dict()
+        config.seed = e["seed"]
+        config.memory.max_episodes = min(config.memory.max_episodes, len(e["train_names"]))
+        config.hub.max_assemblies = min(config.hub.max_assemblies, len(e["train_names"]))
+        like = Agent(config, batch=len(e["orders"]), develop=False).state_dict()
     except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
         return f"config does not build an agent ({type(err).__name__})"
     got = e["agent"]

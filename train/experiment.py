@@ -8,6 +8,7 @@ agent. Either way the agent only ever sees what the world measured.
 
 from __future__ import annotations
 
+import contextlib
 import math
 import statistics
 from dataclasses import InitVar, dataclass, field
@@ -16,6 +17,7 @@ import torch
 
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.rules import PROPERTIES, RULE_NAMES
+from train import checkpoint
 
 MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
 
@@ -189,7 +191,8 @@ class Experiment:
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """(B,) what each order's agent expects one object (a plain measurement dict) to displace, in cm^3."""
-        return self.agent.predict(stack_measurements([measurement] * len(self.orders)))
+        with one_thread():   # a few small agents: a second thread only waits on a busy core (10 ms quiet, 600 busy)
+            return self.agent.predict(stack_measurements([measurement] * len(self.orders)))
 
     def probe_predictions(self) -> torch.Tensor:
         """(B, n_probes) expected cm^3 for every probe object, learning frozen, as `predict` gives them probe by
@@ -199,11 +202,12 @@ class Experiment:
         B, n = len(self.orders), len(self.probe_names)
         if n == 0:
             return torch.zeros(B, 0)
-        seen = [self.agent.activities(stack_measurements([self.probes[name]["measurement"]] * B))
-                for name in self.probe_names]
-        acts, present = (torch.stack([s[i] for s in seen], 1).flatten(0, 1) for i in (0, 1))   # order-major
-        agents = self.agent.select(torch.arange(B).repeat_interleave(n))
-        return agents.anticipate_acts(acts, present).expected.view(B, n)
+        with one_thread():   # small agents' tiny ops: a second thread only waits on a busy core (see one_thread)
+            seen = [self.agent.activities(stack_measurements([self.probes[name]["measurement"]] * B))
+                    for name in self.probe_names]
+            acts, present = (torch.stack([s[i] for s in seen], 1).flatten(0, 1) for i in (0, 1))   # order-major
+            agents = self.agent.select(torch.arange(B).repeat_interleave(n))
+            return agents.anticipate_acts(acts, present).expected.view(B, n)
 
     def probe_errors(self) -> list[float | None]:
         pred = self.probe_predictions()
@@ -243,19 +247,25 @@ class Experiment:
         return exp
 
 
-def load_experiment(path) -> Experiment:
-    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
-    Experiment, agents included.
-
-    Runs on one torch thread (restored after): building a few agents is hundreds of tiny ops, and on a busy 2-core
-    machine a second thread made each of them wait (measured: 0.8 ms on one thread, 12-150 ms on two)."""
-    from train.checkpoint import load
+@contextlib.contextmanager
+def one_thread():
+    """torch on one thread inside, the caller's thread count restored after. For the library's calls on a few
+    agents (load_experiment, Experiment.predict, probe_predictions): hundreds of tiny ops, on which a second thread
+    only waits for a busy core (measured on 2 cores, 4 agents: predict 10 ms quiet, 600 ms on two threads beside
+    another job; load 0.8 ms on one thread, 12-150 ms on two)."""
     threads = torch.get_num_threads()
     torch.set_num_threads(1)
     try:
-        return Experiment.from_state_dict(load(path)["experiment"])
+        yield
     finally:
         torch.set_num_threads(threads)
+
+
+def load_experiment(path) -> Experiment:
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
+    Experiment, agents included."""
+    with one_thread():   # building a few agents is hundreds of tiny ops: a second thread only waits (see one_thread)
+        return Experiment.from_state_dict(checkpoint.load(path)["experiment"])
 
 
 def _imagined(exp_agent, im, b: int) -> dict:
