@@ -49,7 +49,8 @@ from train.experiment import closed_form_outcomes, draw_orders, stack_measuremen
 from train.population import knowledge_keys  # noqa: E402
 from train.physics import cores  # noqa: E402
 from train.progress import Step  # noqa: E402
-from cli_args import count, seed  # noqa: E402
+from cli_args import count, record_flag, seed  # noqa: E402
+from record import run_main  # noqa: E402
 
 MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper -gating": ("paper", ("gating",)),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
@@ -144,7 +145,7 @@ def main():
     ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
                     help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
-    ap.add_argument("--record", action="store_true", help="write the output into BENCHMARKS.md")
+    record_flag(ap)
     a = ap.parse_args()
     conditions = [c.strip() for c in a.conditions.split(",") if c.strip()]
     if bad := [c for c in conditions if c not in MODELS and c not in PEERS]:
@@ -210,9 +211,4 @@ def main():
 
 
 if __name__ == "__main__":
-    if "--record" in sys.argv:
-        from record import recorded
-        with recorded("ablation"):
-            main()
-    else:
-        main()
+    run_main("ablation", main)

@@ -57,16 +57,14 @@ def test_every_bench_refuses_a_bad_flag_in_one_line(name):
 
 
 def test_every_recording_bench_records_only_with_record():
-    """Each bench that writes BENCHMARKS.md does it through record.run_main (only with --record) and takes the flag;
-    ablation.py checks the flag itself."""
+    """Each bench that writes BENCHMARKS.md does it through record.run_main (only with --record) and takes the flag."""
     for path in BENCHES.glob("*.py"):
         text = path.read_text()
-        if path.name in ("record.py", "ablation.py"):
+        if path.name == "record.py":
             continue
         assert "recorded(" not in text, f"{path.name} records without --record"
         if "run_main(" in text:
             assert "record_flag(ap" in text, f"{path.name} does not accept --record"
-    assert 'if "--record" in sys.argv' in (BENCHES / "ablation.py").read_text()
 
 
 @pytest.mark.parametrize("name, args", [("memory_capacity.py", ["--throughput", "--record"]),
