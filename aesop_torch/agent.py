@@ -5,17 +5,24 @@ and the rules, for B agents at once (one per presentation order). It never sees 
 measurements (the dict an `aesop_torch.encoders.SensoryEncoder` reads) and observed outcomes as tensors, so any
 object-and-outcome source can drive it.
 
-Choices the paper leaves open, made here:
+Two models share this loop (AgentConfig.model; docs/model.md). "paper": the rules edit the pathway strengths one
+firing at a time (incremental_rules.py), compare the present with the strongest recalled episode, and the prediction
+is the recall-strength-weighted average of the recalled rewards (readouts.py). "extended": the evidence-set rules
+with contexts (rules.py) and the fitted readout described under Prediction below, with its physics priors.
+
+Choices the paper leaves open, made here (where one model only, it says which):
 - Weight before lifting: the expectation is formed after the object is lifted, so the felt weight is part of the
   cue, for dropped objects and probes alike (a probe is lifted, weighed and put back).
 - Graded maps, read as populations. An object is stored in the hub as the bump of activity around each map's winner
   (hub.ObjectHub.allocate), and a map's activity, bottom-up or retro-activated from a recalled episode, is read
   as a population vector (SelfOrganizingMap.decode): values between units, not only at a winner's codebook vector.
-- Which recalled episode the rules compare against: each of them. Every recalled episode is one comparison, with
-  DeltaProperty (the property's decoded bottom-up value against the value that episode retro-activates, through
-  the pathway's strength in the comparison's context: an eliminated pathway retro-activates nothing, so it shows no
-  change) and DeltaContradiction (the observed volume against that episode's) judged against the same past event.
-- Prediction: a recall-strength-weighted readout that follows the properties the rules have not ruled out. Recalled
+- Which recalled episode the rules compare against: the strongest (paper), each of them (extended). Every compared
+  episode is one comparison, with DeltaProperty (the property's decoded bottom-up value against the value that
+  episode retro-activates, through the pathway's strength in the comparison's context: an eliminated pathway
+  retro-activates nothing, so it shows no change) and DeltaContradiction (the observed volume against that
+  episode's) judged against the same past event.
+- Prediction (extended; the paper model averages the recalled rewards): a recall-strength-weighted readout that
+  follows the properties the rules have not ruled out. Recalled
   episodes are split by what became of their objects (floated or sank); within each, the log reward is fitted as a
   linear function of the properties that context has not eliminated (one eliminated in the other context is still
   followed), its dominant ones among them (weighted least squares, weights = recall strength, Huber-reweighted so that
@@ -210,8 +217,9 @@ class AgentConfig:
     recall_sharpness: float = 16.0
     # how many of the recalled episodes (strongest first) the rules compare the present with; None: every one (the
     # extended model). The paper compares with "the recalled past event": 1. On the tuning seeds above,
-    # comparing with every recalled episode gave errors 0.28 / 0.18 and eliminated weight, size and shape together
-    # in 12 of 32 (set, order) (each episode is compared with ~all the store: every chance of a wrong Elimination)
+    # comparing with every recalled episode gave errors 0.28 / 0.18 (at recall_sharpness 8, against 0.25 / 0.14 with
+    # the strongest alone) and ended with all four properties eliminated in 12 of 32 (set, order) (each episode is
+    # compared with ~all the store: every chance of a wrong Elimination)
     compare_with: int | None = 1
     seed: int = 0
 

@@ -131,8 +131,9 @@ def test_gating_ablation_makes_the_cue_ignore_the_strengths():
     for agent in (on, off):
         agent.hub.strength[0, C] = 0.05                             # colour eliminated
         remember(agent, lifted(RED, 420), 365.0, True)
-    cue_on = on.hub.bottom_up(*on.activities(lifted(BLUE, 420)))
-    assert on.anticipate(lifted(BLUE, 420)).recall.strength[0, 0] > off.anticipate(lifted(BLUE, 420)).recall.strength[0, 0]
+    blue = lifted(BLUE, 420)
+    cue_on = on.hub.bottom_up(*on.activities(blue))
+    assert on.anticipate(blue).recall.strength[0, 0] > off.anticipate(blue).recall.strength[0, 0]
     assert cue_on.max().item() > 0.95                               # colour barely counts: a near-full match
 
 
