@@ -1,6 +1,6 @@
 """Random object sets: a seeded generator of valid objects files, for trying the model on sets it has never seen.
 
-    python -m sim.make_objects --seed S [--train 8] [--probe 8] [--pairs] [--jar default|random] [--out FILE]
+    python -m sim.make_objects --seed S [--train 8] [--probe 8] [--pairs] [--jar default|random] [--out FILE [--force]]
 
 Every set holds every shape among its train objects, sinkers and floaters (densities log-uniform over 0.15 to
 3 g/cm^3, at least a quarter of the train objects on each side of water), sizes spread over what fits the jar
@@ -12,19 +12,29 @@ mass, another shape, both sinking). The rest are drawn freely. Probes are always
 
 The same seed and arguments give the same file, byte for byte. The result is validated by `sim.objects` (an object
 that would not fit is redrawn), so what is written always loads.
+
+`--out FILE` is written atomically (a temporary file in the same directory, renamed into place), never over an
+existing file unless `--force` is given, never through a symbolic link, and never onto a directory or anything but
+a regular file. Every refusal (a bad flag too) is one line on stderr, exit code 2.
 """
 
 from __future__ import annotations
 
 import argparse
+import errno
 import json
 import math
+import os
 import sys
+import tempfile
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
-from sim.objects import PALETTE, ObjectsConfig, ObjectsFileError, parse_objects
+from sim.objects import PALETTE, ObjectsConfig, ObjectsFileError, _printable, parse_objects
+
+PROG = "python -m sim.make_objects"
 
 SHAPE_ORDER = ("cylinder", "cube", "sphere", "box")
 
@@ -192,31 +202,107 @@ def _ordered(o: dict) -> dict:
     return {k: o[k] for k in ("name", "shape", "color", "dims_cm", "mass_g")}
 
 
+class UsageError(Exception):
+    """A refused command line or --out: one line on stderr, exit code 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    def error(self, message):   # argparse prints its usage and the message; one line is enough
+        raise UsageError(message)
+
+
+def _out_problem(out: Path, force: bool) -> str | None:
+    """Why `out` cannot be written, or None."""
+    if str(out) == "":
+        return "--out is empty"
+    if out.is_symlink():
+        return f"--out {out} is a symbolic link (not followed: give the file's own path)"
+    if out.is_dir():
+        return f"--out {out} is a directory (give a file name in it)"
+    parent = out.parent
+    if not parent.is_dir():
+        return f"--out {out}: its directory {parent} does not exist" if not parent.exists() else \
+            f"--out {out}: {parent} is not a directory"
+    if out.exists():
+        if not out.is_file():
+            return f"--out {out} exists and is not a regular file"
+        if not force:
+            return f"--out {out} exists (--force to overwrite it)"
+    return None
+
+
+def write_atomically(out: Path, text: str, force: bool) -> None:
+    """Write `text` to `out` through a temporary file in its directory: a reader never sees half a file, and a
+    failure leaves no file behind. Without `force` the file is put in place with a hard link, which fails if the
+    name was taken meanwhile; where hard links are not supported, by a rename after checking the name is free.
+    UsageError (one line) if it cannot."""
+    why = _out_problem(out, force)
+    if why:
+        raise UsageError(why)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
+    except OSError as e:
+        raise UsageError(f"--out {out}: cannot write in {out.parent}: {e.strerror or e}") from None
+    try:
+        with os.fdopen(fd, "w", encoding="utf-8") as f:
+            umask = os.umask(0)
+            os.umask(umask)
+            os.fchmod(f.fileno(), 0o666 & ~umask)   # as a plain open() would create it, not mkstemp's 0600
+            f.write(text)
+            f.flush()
+            os.fsync(f.fileno())
+        if force:
+            os.replace(tmp, out)
+        else:
+            try:
+                os.link(tmp, out)
+            except FileExistsError:
+                raise UsageError(f"--out {out} exists (--force to overwrite it)") from None
+            except OSError as e:
+                if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
+                    raise
+                if os.path.lexists(out):
+                    raise UsageError(f"--out {out} exists (--force to overwrite it)") from None
+                os.replace(tmp, out)
+    except OSError as e:
+        raise UsageError(f"--out {out}: cannot write it: {e.strerror or e}") from None
+    finally:
+        if os.path.lexists(tmp):
+            os.unlink(tmp)
+
+
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="python -m sim.make_objects", description=__doc__.split("\n")[0],
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    config = ObjectsConfig()
+    ap = _Parser(prog=PROG, description=__doc__.split("\n")[0],
+                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     ap.add_argument("--seed", type=int, required=True, help="the set's seed (same seed, same file)")
-    ap.add_argument("--train", type=int, default=8, help="train objects (>= 4; >= 6 with --pairs)")
+    ap.add_argument("--train", type=int, default=8,
+                    help=f"train objects (4 to {config.max_objects}; >= 6 with --pairs)")
     ap.add_argument("--probe", type=int, default=8, help="probe objects")
     ap.add_argument("--pairs", action="store_true", help="include colour, weight, size and shape pairs")
     ap.add_argument("--jar", choices=("random", "default"), default="random", help="a random jar or the default")
     ap.add_argument("--out", default="-", help="output file ('-': standard output)")
-    a = ap.parse_args(argv)
-    if not 0 <= a.seed < 2 ** 63 or not 4 <= a.train <= 1000 or not 0 <= a.probe <= 1000:
-        print("python -m sim.make_objects: error: --seed must be in 0..2^63-1, --train in 4..1000, --probe in "
-              "0..1000", file=sys.stderr)
-        return 2
+    ap.add_argument("--force", action="store_true", help="overwrite --out if it exists")
     try:
-        data = generate(a.seed, a.train, a.probe, a.pairs, a.jar)
-    except (ValueError, ObjectsFileError) as e:
-        print(f"python -m sim.make_objects: error: {e}", file=sys.stderr)
+        a = ap.parse_args(argv)
+        if not 0 <= a.seed < 2 ** 63 or not 4 <= a.train <= config.max_objects or not 0 <= a.probe <= 1000:
+            raise UsageError(f"--seed must be in 0..2^63-1, --train in 4..{config.max_objects} (the agent's memory "
+                             f"holds {config.max_objects} episodes), --probe in 0..1000")
+        out = None if a.out == "-" else Path(a.out)
+        if out is not None and (why := _out_problem(out, a.force)):
+            raise UsageError(why)          # before the work, as well as when writing
+        try:
+            data = generate(a.seed, a.train, a.probe, a.pairs, a.jar, config=config)
+        except (ValueError, ObjectsFileError) as e:
+            raise UsageError(str(e)) from None
+        text = json.dumps(data, indent=1) + "\n"
+        if out is None:
+            sys.stdout.write(text)
+        else:
+            write_atomically(out, text, a.force)
+    except UsageError as e:
+        print(f"{PROG}: error: {_printable(str(e))}", file=sys.stderr)
         return 2
-    text = json.dumps(data, indent=1) + "\n"
-    if a.out == "-":
-        sys.stdout.write(text)
-    else:
-        from pathlib import Path
-        Path(a.out).write_text(text)
     return 0
 
 

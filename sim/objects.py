@@ -14,6 +14,13 @@ turned is refused with a hint to list its longest side last.
 Unknown keys are refused (a typo such as "mass" for "mass_g" must not silently fall back to a default), except keys
 that start with "_", which are comments (JSON has none). Validation reads the file and never writes anything.
 
+What the file admits, a run must finish: every limit the world, the robot or the agent has is checked here, up front,
+and named in `ObjectsConfig` with where it comes from (the jar's size from the table and the arm's reach, the water's
+least depth from the ball, the lightest object from the hand and from the simulated water, the number of objects
+from the agent's memory). A bad file is refused with one ObjectsFileError line naming the object and the field;
+nothing else is raised for any JSON value in any field, and a message never carries a raw control character (a name
+with a newline or an ANSI escape is shown escaped, `_show`).
+
 Not refused, but outside the closed form: a light object longer than the jar is wide that cannot float upright
 ends leaning on the wall, which then carries part of its weight, so it displaces less than its mass (a 3 x 18 cm,
 60 g stick: 54 cm^3, not 60). No default object comes near that.
@@ -66,10 +73,38 @@ TRIAL_KEYS = {"stand", "goal"}
 DEFAULT_GOAL = "reach the green ball"   # the paper's goal: what the teacher says when a trial names none
 MAX_GOAL_CHARS = 200         # a goal is a short phrase; this bounds the error line that quotes it
 MAX_STAND = 8                # objects on the stand of one goal trial: the exact random baseline enumerates subsets
+MAX_SHOWN = 60               # characters of a refused value quoted in an error line
 
 
 class ObjectsFileError(ValueError):
-    """A bad objects file; the message is one line naming the object (or the jar) and the field."""
+    """A bad objects file; the message is one line naming the object (or the jar) and the field.
+
+    Whatever the message quotes (a name, a key, a path), it is printed escaped: a character that does not print
+    (a newline, an ANSI escape, a bidi control) appears as its Python escape, so the error is one line and cannot
+    move the terminal's cursor or recolour it."""
+
+    def __init__(self, message: str):
+        super().__init__(_printable(str(message)))
+
+
+def _printable(text: str) -> str:
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def _show(value) -> str:
+    """A refused value as the error line quotes it: JSON (so a string is quoted and every non-ASCII or control
+    character escaped), cut to MAX_SHOWN characters."""
+    try:
+        text = json.dumps(value, ensure_ascii=True)
+    except (TypeError, ValueError, RecursionError):   # not a JSON value (parse_objects on a Python object)
+        text = _printable(repr(value))
+    return text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "..."
+
+
+def _quoted(word) -> str:
+    """A key or a word as the error line quotes it: in single quotes, escaped as `_show` escapes a string."""
+    text = json.dumps(str(word), ensure_ascii=True)[1:-1].replace('\\"', '"')
+    return "'" + (text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "...") + "'"
 
 
 @dataclass(frozen=True)
@@ -86,6 +121,48 @@ class ObjectsConfig:
     min_dim_cm: float = 1.0
     # the iCub's arm carries about a kilogram; heavier would make the carry a test of the motors, not of the task.
     max_mass_g: float = 1000.0
+    # the lightest object: the least mass the hand reports (sim/sensor_model.py SensorModel.min_felt_mass_g, which
+    # sim/world.py's weighing also floors to). Below it an object would be felt as heavier than it is; far below it
+    # the engine breaks: pybullet takes a body under 2.2e-16 kg as static, and the hand "lifting" it fights its own
+    # motors (1e-300 g was felt as 22,707 g).
+    min_mass_g: float = 0.1
+    # a light, wide object bobs on the water at w = sqrt(rho g a / (m (1 - a / A))) (a: its cross-section at the
+    # surface, A the jar's: the level rises as it sinks), and the simulated water (sim/water.py, explicit buoyancy
+    # at TankConfig.timestep_s = 1/240 s) follows that only while w dt stays under ~1.5: measured, a 7 x 1 cm disc
+    # of 0.3 g (w dt ~ 1.8) jumps out of the 12 cm jar, of 0.4 g (~ 1.6) settles; a 24.5 x 1 cm disc in a 29 cm
+    # jar fails at 10.5 g (~ 1.6), settles from 12 g (~ 1.5). So m (1 - a / A) / a >= this (`min_mass_g_for`), a
+    # taken as large as the object can show: w dt <= 0.83 at the limit (tests/test_water.py), about 3x the mass
+    # where it fails; the 7 cm disc at least 1.8 g, the 24.5 cm one 41 g, a 3 cm cube 0.36 g.
+    min_mass_per_area_g_cm2: float = 0.025
+    # the jar stands on the table (sim/world.py WorldConfig: its axis at jar_xy = (0.27, 0.06) m, 15 cm from the
+    # table's front edge at x = 0.12 m, which keeps the robot's pelvis clear; TankConfig's walls are 0.5 cm thick),
+    # so its inner diameter is at most 2 x (15 - 0.5) cm (tests/test_world.py derives it and runs the widest jar).
+    max_jar_diameter_cm: float = 29.0
+    # the hand carries an object's bottom 4 cm over the rim and withdraws 6 cm above that after letting go
+    # (WorldConfig carry_clearance_cm, hover_cm; the palm 1.5 cm over the object's top): its highest point is the
+    # table (0.40 m) + the jar's 1 cm bottom + jar height + object height + 11.5 cm. The palm, facing down, reaches
+    # 1.00 m above the jar (IK; measured: jar + object 47 cm runs, 48 cm fails), so jar + object height <= this,
+    # 2 cm short of it; the jar's own height is at most this less the smallest object (min_dim_cm).
+    max_jar_plus_object_cm: float = 45.0
+    # the green ball (ball_diameter_cm, 2.7 g: sim/water.py TankConfig) floats with a 0.7 cm draft; 2 cm of water
+    # keeps it 1.3 cm off the bottom, floating free (shallower, it rests on the bottom and the closed form no longer
+    # holds; under 0.24 cm the jar holds less water than the ball displaces and the world cannot be built).
+    min_water_depth_cm: float = 2.0
+    # objects the agent can meet in one life: train (one episode each) plus pool (dropped in goal trials). The
+    # memory holds 230 episodes and the hub 230 objects (aesop_torch/memory.py MemoryConfig.max_episodes,
+    # aesop_torch/hub.py HubConfig.max_assemblies; tests/test_objects_limits.py checks they agree); beyond that the
+    # run would stop mid-way, "object hub full".
+    max_objects: int = 230
+
+    @property
+    def max_jar_height_cm(self) -> float:
+        """The tallest jar the hand can carry the smallest object over."""
+        return self.max_jar_plus_object_cm - self.min_dim_cm
+
+    @property
+    def min_jar_diameter_cm(self) -> float:
+        """The narrowest jar that holds the smallest object beside the ball, with the clearances."""
+        return self.ball_diameter_cm + 2.0 * self.fit_clearance_cm + self.min_dim_cm
 
 
 @dataclass(frozen=True)
@@ -138,6 +215,16 @@ class ObjectSpec:
     def fill(self) -> float:
         """Volume / bounding-box volume: 1 for a cube or box, pi/4 for a cylinder, pi/6 for a sphere."""
         return FILL[self.shape]
+
+    @property
+    def max_section_cm2(self) -> float:
+        """A bound on the largest plane cross-section through the object, the most it can show at a water surface
+        in any pose: a sphere's great circle; otherwise longest side x the diagonal of the other two (a cube's
+        diagonal rectangle exactly, above a box's or a cylinder's largest section)."""
+        if self.shape == "sphere":
+            return math.pi * self.dims_cm[0] ** 2 / 4.0
+        e = self.extent_cm
+        return float(e[0] * math.hypot(e[1], e[2]))
 
     @property
     def density_g_cm3(self) -> float:
@@ -208,6 +295,17 @@ class ObjectSet:
         return out
 
 
+def min_mass_g_for(spec: ObjectSpec, jar: JarSpec, config: ObjectsConfig = ObjectsConfig()) -> float:
+    """The lightest `spec` (its shape and size) may be in `jar` for the world to simulate it: the hand's least
+    felt mass, and enough mass for the simulated water to follow its bobbing (ObjectsConfig.min_mass_per_area_g_cm2):
+    m >= mu a / (1 - a / A), with a the most it can show at the surface: its largest cross-section
+    (`ObjectSpec.max_section_cm2`), at most the room beside the ball (a disc of the jar's diameter less the ball
+    and the clearances), so a / A < 1."""
+    room = jar.inner_diameter_cm - config.ball_diameter_cm - 2.0 * config.fit_clearance_cm
+    a = min(spec.max_section_cm2, math.pi * room * room / 4.0)
+    return max(config.min_mass_g, config.min_mass_per_area_g_cm2 * a / (1.0 - a / jar.area_cm2))
+
+
 def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
     """The closed-form yardstick: water displaced once the object is at rest in the jar (1 g/cm^3 water).
 
@@ -268,13 +366,22 @@ def _bounded_int(literal: str) -> int:
     return int(literal)
 
 
+# a string (an unterminated one runs to the end of the text) or a bracket. The unrolled loop never backtracks
+# (its two branches start on different characters, and the closing quote is optional), so one pass is linear in the
+# text, however its quotes and backslashes fall. The previous pattern, '"(?:[^"\\]|\\.)*"', failed from every
+# quote of an unterminated string of escaped quotes: quadratic, ~35 min on a 1 MB file.
+_TOKEN = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"?|[\[\]{}]', re.DOTALL)
+
+
 def _nesting(text: str) -> int:
-    """The deepest nesting of [ and { outside strings (the file is not yet known to be valid JSON)."""
+    """The deepest nesting of [ and { outside strings (the file is not yet known to be valid JSON). Linear time."""
     depth = deepest = 0
-    for c in re.sub(r'"(?:[^"\\]|\\.)*"', "", text):
+    for m in _TOKEN.finditer(text):
+        c = m.group()
         if c in "[{":
             depth += 1
-            deepest = max(deepest, depth)
+            if depth > deepest:
+                deepest = depth
         elif c in "]}":
             depth -= 1
     return deepest
@@ -285,17 +392,20 @@ def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     if not isinstance(data, dict):
         raise ObjectsFileError("the objects file must be a JSON object with a 'train' list")
     _no_unknown_keys(data, TOP_KEYS, "the objects file")
-    jar = _parse_jar(data.get("jar"), config)
+    jar = _parse_jar(data["jar"], config) if "jar" in data else JarSpec(*config.default_jar)
     if "train" not in data:
         raise ObjectsFileError("the objects file has no 'train' list")
-    groups = {}
     for group in ("train", "probe", "pool"):
-        items = data.get(group, [])
-        if not isinstance(items, list):
-            raise ObjectsFileError(f"'{group}' must be a list of objects")
-        groups[group] = [_parse_object(item, f"{group}[{i}]", jar, config) for i, item in enumerate(items)]
-    if not groups["train"]:
+        if not isinstance(data.get(group, []), list):
+            raise ObjectsFileError(f"'{group}' must be a list of objects, not {_show(data[group])}")
+    if not data["train"]:
         raise ObjectsFileError("'train' is empty: at least one object must be dropped")
+    met = len(data["train"]) + len(data.get("pool", []))
+    if met > config.max_objects:
+        raise ObjectsFileError(f"'train' and 'pool' hold {met} objects, more than the agent can learn in one life "
+                               f"(at most {config.max_objects}: its memory holds {config.max_objects} episodes)")
+    groups = {group: [_parse_object(item, f"{group}[{i}]", jar, config) for i, item in enumerate(data.get(group, []))]
+              for group in ("train", "probe", "pool")}
     seen = set()
     for o in groups["train"] + groups["probe"] + groups["pool"]:
         if o.name in seen:
@@ -310,19 +420,21 @@ def _parse_trials(items, names: set) -> tuple[list[tuple[str, ...]], list[str | 
     """`trials`: a list of {"stand": [names], "goal": phrase}, 1 to MAX_STAND distinct objects of train, probe or
     pool each, and optionally the teacher's goal (`_parse_goal`). Returns the stands and the goals."""
     if not isinstance(items, list):
-        raise ObjectsFileError("'trials' must be a list of {\"stand\": [names], \"goal\": phrase}")
+        raise ObjectsFileError(f"'trials' must be a list of {{\"stand\": [names], \"goal\": phrase}}, not "
+                               f"{_show(items)}")
     trials, goals = [], []
     for i, t in enumerate(items):
         where = f"trials[{i}]"
         if not isinstance(t, dict):
-            raise ObjectsFileError(f"{where}: must be an object {{\"stand\": [names]}}")
+            raise ObjectsFileError(f"{where}: must be an object {{\"stand\": [names]}}, not {_show(t)}")
         _no_unknown_keys(t, TRIAL_KEYS, where)
         stand = t.get("stand")
         if not isinstance(stand, list) or not 1 <= len(stand) <= MAX_STAND:
-            raise ObjectsFileError(f"{where} field 'stand': must be a list of 1 to {MAX_STAND} object names")
+            raise ObjectsFileError(f"{where} field 'stand': must be a list of 1 to {MAX_STAND} object names, not "
+                                   f"{_show(stand)}")
         for n in stand:
             if not isinstance(n, str) or n not in names:
-                raise ObjectsFileError(f"{where} field 'stand': {json.dumps(n)} is not an object of train, probe "
+                raise ObjectsFileError(f"{where} field 'stand': {_show(n)} is not an object of train, probe "
                                        f"or pool")
         if len(set(stand)) != len(stand):
             raise ObjectsFileError(f"{where} field 'stand': an object is listed twice")
@@ -339,14 +451,13 @@ def _parse_goal(goal, where: str) -> str | None:
     from aesop_torch.encoders import FUNCTION_WORDS, GOAL_WORDS, VOCABULARY, unknown_words
     at = f"{where} field 'goal'"
     if not isinstance(goal, str) or not goal.strip() or len(goal) > MAX_GOAL_CHARS:
-        shown = json.dumps(goal if not isinstance(goal, str) or len(goal) <= 40 else goal[:40] + "...")
-        raise ObjectsFileError(f"{at}: must be a phrase of 1 to {MAX_GOAL_CHARS} characters, not {shown}")
+        raise ObjectsFileError(f"{at}: must be a phrase of 1 to {MAX_GOAL_CHARS} characters, not {_show(goal)}")
     if unknown := unknown_words(goal):
-        raise ObjectsFileError(f"{at}: unknown word(s) {', '.join(map(repr, unknown))} (the words I know: "
+        raise ObjectsFileError(f"{at}: unknown word(s) {', '.join(map(_quoted, unknown))} (the words I know: "
                                f"{' '.join(VOCABULARY + FUNCTION_WORDS)})")
     words = goal.lower().replace("_", " ").split()
     if not set(GOAL_WORDS) <= set(words):
-        raise ObjectsFileError(f"{at}: {json.dumps(goal)} is no goal I know: I can reach the ball (a goal says "
+        raise ObjectsFileError(f"{at}: {_show(goal)} is no goal I know: I can reach the ball (a goal says "
                                f"{' and '.join(map(repr, GOAL_WORDS))}, e.g. {json.dumps(DEFAULT_GOAL)})")
     phrase = " ".join(words)
     return None if phrase == DEFAULT_GOAL else phrase
@@ -355,13 +466,17 @@ def _parse_goal(goal, where: str) -> str | None:
 def _no_unknown_keys(d: dict, allowed: set, where: str):
     unknown = sorted(k for k in d if k not in allowed and not str(k).startswith("_"))
     if unknown:
-        raise ObjectsFileError(f"{where}: unknown key '{unknown[0]}' (allowed: {', '.join(sorted(allowed))}; "
+        raise ObjectsFileError(f"{where}: unknown key {_quoted(unknown[0])} (allowed: {', '.join(sorted(allowed))}; "
                                f"keys starting with '_' are comments)")
 
 
 def _number(value, where: str, field: str) -> float:
+    """A finite number > 0 as a float. A Python int too large for a float (parse_objects on a dict; a file's
+    integers are already bounded by MAX_DIGITS) is refused here, not by an OverflowError."""
     if isinstance(value, bool) or not isinstance(value, (int, float)):
-        raise ObjectsFileError(f"{where} field '{field}': must be a number, not {json.dumps(value)}")
+        raise ObjectsFileError(f"{where} field '{field}': must be a number, not {_show(value)}")
+    if isinstance(value, int) and abs(value) >= 10 ** MAX_DIGITS:
+        raise ObjectsFileError(f"{where} field '{field}': must be a number of at most {MAX_DIGITS} digits")
     if not math.isfinite(value):
         raise ObjectsFileError(f"{where} field '{field}': must be finite, not {value}")
     if value <= 0:
@@ -370,31 +485,48 @@ def _number(value, where: str, field: str) -> float:
 
 
 def _parse_jar(jar, config: ObjectsConfig) -> JarSpec:
-    if jar is None:
-        return JarSpec(*config.default_jar)
+    """The jar: each of its three numbers finite and > 0 (missing ones default), the water shallower than the jar,
+    and within what the world can hold: a jar on the table, the robot able to carry an object over its rim, and
+    water the ball floats in (`ObjectsConfig`)."""
     if not isinstance(jar, dict):
-        raise ObjectsFileError("jar: must be an object with inner_diameter_cm, height_cm, water_depth_cm")
+        raise ObjectsFileError(f"jar: must be an object with inner_diameter_cm, height_cm, water_depth_cm, not "
+                               f"{_show(jar)}")
     _no_unknown_keys(jar, JAR_KEYS, "jar")
     default = dict(zip(("inner_diameter_cm", "height_cm", "water_depth_cm"), config.default_jar))
     vals = {k: _number(jar[k], "jar", k) if k in jar else default[k] for k in default}
-    if vals["water_depth_cm"] >= vals["height_cm"]:
-        raise ObjectsFileError(f"jar field 'water_depth_cm': {vals['water_depth_cm']} cm of water does not fit "
-                               f"in a jar {vals['height_cm']} cm high")
+    d, h, w = vals["inner_diameter_cm"], vals["height_cm"], vals["water_depth_cm"]
+    if d > config.max_jar_diameter_cm:
+        raise ObjectsFileError(f"jar field 'inner_diameter_cm': {d:g} cm is wider than the table holds (at most "
+                               f"{config.max_jar_diameter_cm:g} cm: the jar stands on the table, in reach of the "
+                               f"robot)")
+    if d < config.min_jar_diameter_cm:
+        raise ObjectsFileError(f"jar field 'inner_diameter_cm': {d:g} cm leaves no room for an object beside the "
+                               f"{config.ball_diameter_cm:g} cm ball (at least {config.min_jar_diameter_cm:g} cm)")
+    if h > config.max_jar_height_cm:
+        raise ObjectsFileError(f"jar field 'height_cm': {h:g} cm is taller than the robot can carry an object over "
+                               f"(at most {config.max_jar_height_cm:g} cm: jar and object together at most "
+                               f"{config.max_jar_plus_object_cm:g} cm)")
+    if w >= h:
+        raise ObjectsFileError(f"jar field 'water_depth_cm': {w:g} cm of water does not fit in a jar {h:g} cm high")
+    if w < config.min_water_depth_cm:
+        raise ObjectsFileError(f"jar field 'water_depth_cm': {w:g} cm of water is too shallow for the "
+                               f"{config.ball_diameter_cm:g} cm ball to float (at least "
+                               f"{config.min_water_depth_cm:g} cm)")
     return JarSpec(**vals)
 
 
 def _parse_color(color, where: str) -> tuple[float, float, float]:
     if isinstance(color, str):
         if color.lower() not in PALETTE:
-            raise ObjectsFileError(f"{where} field 'color': unknown colour name '{color}' "
+            raise ObjectsFileError(f"{where} field 'color': unknown colour name {_quoted(color)} "
                                    f"(known: {', '.join(sorted(PALETTE))}; or [r, g, b] in 0..1)")
         return PALETTE[color.lower()]
     ok = isinstance(color, list) and len(color) == 3 and all(
-        isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) and 0.0 <= c <= 1.0
-        for c in color)
+        isinstance(c, (int, float)) and not isinstance(c, bool) and abs(c) < 10 ** MAX_DIGITS
+        and math.isfinite(c) and 0.0 <= c <= 1.0 for c in color)
     if not ok:
         raise ObjectsFileError(f"{where} field 'color': must be a palette name or [r, g, b] with each in 0..1, "
-                               f"not {json.dumps(color)}")
+                               f"not {_show(color)}")
     return tuple(float(c) for c in color)
 
 
@@ -402,46 +534,62 @@ def _parse_object(item, where: str, jar: JarSpec, config: ObjectsConfig) -> Obje
     if not isinstance(item, dict):
         raise ObjectsFileError(f"{where}: must be an object with name, shape, color, dims_cm, mass_g")
     name = item.get("name")
-    if not isinstance(name, str) or not NAME_RE.fullmatch(name) or len(name) > MAX_NAME_CHARS:
-        shown = json.dumps(name if not isinstance(name, str) or len(name) <= MAX_NAME_CHARS else name[:40] + "...")
+    if not isinstance(name, str) or len(name) > MAX_NAME_CHARS or not NAME_RE.fullmatch(name):
         raise ObjectsFileError(f"{where} field 'name': must be 1 to {MAX_NAME_CHARS} letters, digits, '_', '.', "
-                               f"'-' starting with a letter or digit (it names a directory), not {shown}")
+                               f"'-' starting with a letter or digit (it names a directory), not {_show(name)}")
     where = f"object '{name}'"
     _no_unknown_keys(item, OBJECT_KEYS, where)
     for k in ("shape", "color", "dims_cm", "mass_g"):
         if k not in item:
             raise ObjectsFileError(f"{where} field '{k}': missing")
     shape = item["shape"]
-    if shape not in SHAPES:
-        raise ObjectsFileError(f"{where} field 'shape': unknown shape {json.dumps(shape)} "
+    if not isinstance(shape, str) or shape not in SHAPES:
+        raise ObjectsFileError(f"{where} field 'shape': unknown shape {_show(shape)} "
                                f"(known: {', '.join(SHAPES)})")
     dims = item["dims_cm"]
     if not isinstance(dims, list) or len(dims) != SHAPES[shape]:
         raise ObjectsFileError(f"{where} field 'dims_cm': a {shape} takes {SHAPES[shape]} number(s) "
-                               f"{DIMS_MEANING[shape]}, not {json.dumps(dims)}")
+                               f"{DIMS_MEANING[shape]}, not {_show(dims)}")
     dims = tuple(_number(d, where, "dims_cm") for d in dims)
     if min(dims) < config.min_dim_cm:
         raise ObjectsFileError(f"{where} field 'dims_cm': {min(dims)} cm is below the smallest size the robot "
                                f"can see and hold ({config.min_dim_cm} cm)")
     mass = _number(item["mass_g"], where, "mass_g")
     if mass > config.max_mass_g:
-        raise ObjectsFileError(f"{where} field 'mass_g': {mass} g is more than the arm carries "
-                               f"({config.max_mass_g} g)")
+        raise ObjectsFileError(f"{where} field 'mass_g': {mass:g} g is more than the arm carries "
+                               f"({config.max_mass_g:g} g)")
+    if mass < config.min_mass_g:
+        raise ObjectsFileError(f"{where} field 'mass_g': {mass:g} g is lighter than the hand can feel (at least "
+                               f"{config.min_mass_g:g} g)")
     spec = ObjectSpec(name, shape, dims, mass, _parse_color(item["color"], where))
     _check_fits(spec, jar, where, config)
+    least = min_mass_g_for(spec, jar, config)
+    if mass < least:
+        raise ObjectsFileError(f"{where} field 'mass_g': {mass:g} g is too light for its size in this jar: the "
+                               f"simulated water could not follow it bobbing (at least {least:.2f} g; see "
+                               f"ObjectsConfig.min_mass_per_area_g_cm2)")
     return spec
+
+
+def _fixed(x: float) -> str:
+    """x to two decimals, or in three significant digits if that would be a long line (a 1e300 cm footprint)."""
+    return f"{x:.2f}" if abs(x) < 1e6 else f"{x:.3g}"
 
 
 def _check_fits(spec: ObjectSpec, jar: JarSpec, where: str, config: ObjectsConfig):
     room = jar.inner_diameter_cm - config.ball_diameter_cm - 2.0 * config.fit_clearance_cm
     if spec.footprint_cm > room:
         hint = " (stand it on its smallest face: list its longest side last)" if spec.shape == "box" else ""
-        raise ObjectsFileError(f"{where} field 'dims_cm': its footprint ({spec.footprint_cm:.2f} cm across) does "
+        raise ObjectsFileError(f"{where} field 'dims_cm': its footprint ({_fixed(spec.footprint_cm)} cm across) does "
                                f"not fit beside the {config.ball_diameter_cm} cm ball in the jar's "
                                f"{jar.inner_diameter_cm} cm (at most {room:.2f} cm across){hint}")
     if spec.height_cm > jar.height_cm:
-        raise ObjectsFileError(f"{where} field 'dims_cm': {spec.height_cm} cm tall, taller than the "
-                               f"{jar.height_cm} cm jar")
+        raise ObjectsFileError(f"{where} field 'dims_cm': {spec.height_cm:g} cm tall, taller than the "
+                               f"{jar.height_cm:g} cm jar")
+    if spec.height_cm + jar.height_cm > config.max_jar_plus_object_cm:
+        raise ObjectsFileError(f"{where} field 'dims_cm': {spec.height_cm:g} cm tall, too tall for the hand to "
+                               f"carry over the {jar.height_cm:g} cm jar's rim (jar and object together at most "
+                               f"{config.max_jar_plus_object_cm:g} cm)")
     v = archimedes_cm3(spec, jar)
     level = jar.water_depth_cm + v / jar.area_cm2
     if level > jar.height_cm:

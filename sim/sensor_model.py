@@ -38,6 +38,13 @@ class SensorModel:
     fill_bias: tuple = (("cylinder", 0.0026), ("cube", -0.0006), ("sphere", -0.0097), ("box", -0.0007))
     # felt mass: rms of the weighed load's error (the wrist sensor's 1 g, sim/world.py WorldConfig.mass_noise_g)
     mass_sd_g: float = 1.04
+    # a hand never feels a weight of zero or less: what it reports is floored here (and by the world's weighing,
+    # WorldConfig.min_felt_mass_g). An object near or under the sensor's noise would otherwise be felt negative,
+    # which no encoder takes ("measurement 'mass_g' must be > 0"), or a hair above 0, whose log is so far below the
+    # weight map's range (1 g up) that no unit responds in float32 ("a present map has no activity to store": from
+    # ~0.03 g down). 0.1 g is a tenth of the noise, and its nearest unit still answers (~1e-22, which the hub
+    # takes relative to its peak); the objects file admits no lighter object (sim/objects.py ObjectsConfig).
+    min_felt_mass_g: float = 0.1
     # displaced volume vs Archimedes over the 13 drops: 0.05 cm^3 rms whatever the volume (the level is read to
     # 0.001 cm, 0.11 cm^3); no part growing with the volume is measurable (the fit gives 0)
     outcome_rel_sd: float = 0.0
@@ -53,7 +60,7 @@ class SensorModel:
         fill_bias = dict(self.fill_bias).get(spec.shape, 0.0)
         ext = np.sort(spec.extent_cm * (1.0 + ext_bias + rng.normal(0.0, self.extent_rel_sd, 3)))[::-1]
         fill = float(np.clip(spec.fill + fill_bias + rng.normal(0.0, self.fill_sd), 0.05, 1.0))
-        mass = max(0.1, spec.mass_g + float(rng.normal(0.0, self.mass_sd_g)))
+        mass = max(self.min_felt_mass_g, spec.mass_g + float(rng.normal(0.0, self.mass_sd_g)))
         return {"rgb": [float(x) for x in rgb], "extent_cm": [float(x) for x in ext], "fill": fill,
                 "mass_g": float(mass)}
 

@@ -490,6 +490,10 @@ class Tank:
         if c.ball_diameter_cm > jar.inner_diameter_cm - 2 * ObjectsConfig.fit_clearance_cm:
             raise ValueError(f"jar inner_diameter_cm {jar.inner_diameter_cm} is too narrow for the "
                              f"{c.ball_diameter_cm} cm ball")
+        draft_cm = self.ball_draft_cm(c)
+        if jar.water_depth_cm <= draft_cm:   # the objects file asks for more (ObjectsConfig.min_water_depth_cm)
+            raise ValueError(f"jar water_depth_cm {jar.water_depth_cm} is too shallow for the ball to float (its "
+                             f"draft is {draft_cm:.2f} cm)")
         p.setGravity(0, 0, -c.gravity, physicsClientId=client)  # the water's forces assume these two
         p.setPhysicsEngineParameter(fixedTimeStep=c.timestep_s, numSolverIterations=c.solver_iterations,
                                     physicsClientId=client)
@@ -506,6 +510,12 @@ class Tank:
                               c.object_friction)
         self.water.add_body(self.ball, "sphere", [d] * 3)
         self.water_visual = self._make_water_visual(R)
+
+    @staticmethod
+    def ball_draft_cm(config: TankConfig) -> float:
+        """How deep the green ball floats in still water, cm."""
+        r = config.ball_diameter_cm * CM / 2
+        return _draft_sphere_m(r, config.ball_mass_g * G / config.water.density) / CM
 
     def _make_jar(self, R: float, t: float, H: float) -> int:
         """One static body: a round bottom plate and a ring of thin staves; it looks like a glass tube.

@@ -36,6 +36,7 @@ from sim.kinematics import ArmKinematics, IKConfig, world_to_root
 from sim.objects import ObjectSet, ObjectSpec, ObjectsConfig
 from sim.perception import CameraConfig, Percept, Workspace, look
 from sim.robot import FACING_PLUS_X, RobotConfig, load_icub, quiet_c_output
+from sim.sensor_model import SensorModel
 from sim.water import CM, G, Tank, TankConfig
 
 
@@ -80,6 +81,9 @@ class WorldConfig:
     weigh_steps: int = 24
     # a wrist force/torque sensor reads ~0.01 N: 1 g of noise on the felt mass (0 for exact readings)
     mass_noise_g: float = 1.0
+    # the least weight the hand reports: the noise would make a light object's felt mass zero or negative, which a
+    # hand never feels (the same floor as the no-physics paths', SensorModel.min_felt_mass_g, which says why)
+    min_felt_mass_g: float = SensorModel.min_felt_mass_g
     level_resolution_cm: float = 0.001   # see the module docstring
     level_noise_cm: float = 0.0
 
@@ -376,7 +380,8 @@ class World:
         self.held = (body, cid)
 
     def weigh(self) -> float:
-        """Hold still and read the load on the hand: grams felt, with the sensor's noise."""
+        """Hold still and read the load on the hand: grams felt, with the sensor's noise, never less than
+        `min_felt_mass_g` (a hand feels no negative weight)."""
         c = self.config
         if self.held is None:
             raise RuntimeError("weigh() needs an object in the hand")
@@ -387,7 +392,8 @@ class World:
             force = p.getConstraintState(self.held[1], physicsClientId=self.client)[:3]
             loads.append(np.linalg.norm(force))  # held still, the hand carries exactly the weight, m g
         grams = float(np.mean(loads)) / c.tank.gravity / G
-        return grams + (float(self.rng.normal(0.0, c.mass_noise_g)) if c.mass_noise_g > 0 else 0.0)
+        grams += float(self.rng.normal(0.0, c.mass_noise_g)) if c.mass_noise_g > 0 else 0.0
+        return max(grams, c.min_felt_mass_g)
 
     def release(self):
         """Let go of the held object (it keeps the hand's velocity, ~0 once a move has ended)."""

@@ -87,3 +87,29 @@ def test_same_seed_same_draws():
     # an object's draws depend on (seed, name) only, not on what else is drawn
     one = MODEL.measure(objects.train[0], MODEL.rng(3, name))
     assert one == a[0][name]["measurement"]
+
+
+def test_a_light_object_is_never_felt_below_the_floor_and_the_agent_stores_it():
+    """The no-physics path's felt mass, like the world's (tests/test_world.py): an object lighter than the hand's
+    noise is felt at least `min_felt_mass_g`, never zero or negative ("measurement 'mass_g' must be > 0") nor a
+    hair above zero, whose weight no map unit answers ("a present map has no activity to store")."""
+    import torch
+    from aesop_torch.agent import Agent, AgentConfig
+    from sim.objects import ObjectsConfig
+    from sim.world import WorldConfig
+    from train.experiment import stack_measurements
+    model = SensorModel(mass_sd_g=5.0)
+    floor = model.min_felt_mass_g
+    assert floor == WorldConfig().min_felt_mass_g == ObjectsConfig().min_mass_g > 0
+    for mass in (ObjectsConfig().min_mass_g, 1e-300):      # the lightest the file admits, and far below it
+        spec = ObjectSpec("feather", "cube", (1.0,), mass, (0.9, 0.9, 0.2))
+        felt = [model.measure(spec, model.rng(s, spec.name))["mass_g"] for s in range(200)]
+        assert min(felt) == floor and sum(f == floor for f in felt) > 50      # about half the draws are floored
+    spec = ObjectSpec("feather", "cube", (1.0,), ObjectsConfig().min_mass_g, (0.9, 0.9, 0.2))
+    m = next(m for s in range(200) if (m := model.measure(spec, model.rng(s, spec.name)))["mass_g"] == floor)
+    agent = Agent(AgentConfig())
+    acts, present = agent.activities(stack_measurements([m]))
+    assert float(acts[0, list(agent.maps).index("weight")].max()) > 0     # the weight map still answers
+    agent.remember(stack_measurements([m]), torch.tensor([0.1]), torch.tensor([False]), torch.tensor([False]),
+                   torch.tensor([0]))
+    assert int(agent.memory.count[0]) == 1

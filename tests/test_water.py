@@ -7,8 +7,9 @@ import numpy as np
 import pybullet as p
 import pytest
 
-from sim.objects import DEFAULT_OBJECTS_FILE, JarSpec, ObjectSpec, archimedes_cm3, load_objects
-from sim.water import CM, Tank, TankConfig, Water, make_body, sample_points
+from sim.objects import (DEFAULT_OBJECTS_FILE, JarSpec, ObjectsConfig, ObjectSpec, archimedes_cm3, load_objects,
+                         min_mass_g_for)
+from sim.water import CM, Tank, TankConfig, Water, WaterConfig, make_body, sample_points
 
 JAR = JarSpec(12.0, 20.0, 14.0)
 
@@ -198,3 +199,45 @@ def test_bad_input_is_refused(client):
         sample_points("box", (0.1, -0.1, 0.1), 100)
     with pytest.raises(ValueError, match="ball"):
         Tank(client, JarSpec(4.0, 20.0, 10.0), [0, 0], 0.0, TankConfig())
+
+
+# -- the objects file's limits that come from the water ---------------------------------------------------------------
+
+def test_the_shallowest_water_the_file_admits_floats_the_ball(client):
+    """ObjectsConfig.min_water_depth_cm: the ball floats clear of the bottom there (1.3 cm of water under it);
+    water shallower than its draft is refused by the tank in one clear line (it was a negative water volume, and
+    a runner's worker failing on it again and again)."""
+    cfg = ObjectsConfig()
+    draft = Tank.ball_draft_cm(TankConfig())
+    assert draft == pytest.approx(0.70, abs=0.01) and cfg.min_water_depth_cm >= draft + 1.0
+    tank = new_tank(client, JarSpec(12.0, 19.5, cfg.min_water_depth_cm))
+    z = p.getBasePositionAndOrientation(tank.ball, physicsClientId=client)[0][2]
+    assert z - tank.config.ball_diameter_cm / 2 * CM - tank.bottom_z > 1.0 * CM      # floating, well off the bottom
+    assert tank.level_cm == pytest.approx(cfg.min_water_depth_cm, abs=0.002)
+    spec = ObjectSpec("o", "cube", (3.0,), 60.0, (0.5, 0.5, 0.5))   # sinks, sticks out of 2 cm of water
+    assert displaced_cm3(tank, spec) == pytest.approx(archimedes_cm3(spec, tank.jar), rel=0.02)
+    for depth in (0.01, 0.5):
+        with pytest.raises(ValueError, match="too shallow for the ball to float"):
+            Tank(client, JarSpec(12.0, 19.5, depth), [0, 0], 0.0, TankConfig())
+
+
+def test_the_lightest_floater_the_file_admits_is_one_the_water_can_follow():
+    """ObjectsConfig.min_mass_per_area_g_cm2: at the limit a floater bobs at w dt <= 0.83 of the timestep (the
+    level's rise included); instability starts near 1.5 (measured: ObjectsConfig)."""
+    cfg, tank, water = ObjectsConfig(), TankConfig(), WaterConfig()
+    mass_per_area = cfg.min_mass_per_area_g_cm2 * 10.0          # g/cm^2 -> kg/m^2
+    w_dt = math.sqrt(water.density * water.gravity / mass_per_area) * tank.timestep_s
+    assert w_dt <= 0.85
+
+
+@pytest.mark.parametrize("jar, shape, dims", [
+    (JarSpec(12.0, 19.5, 14.0), "cylinder", (7.0, 1.0)),       # 0.3 g of it jumped out of the jar
+    (JarSpec(29.0, 20.0, 14.0), "cylinder", (24.5, 1.0)),      # the widest jar, its widest disc
+    (JarSpec(29.0, 20.0, 14.0), "box", (17.3, 17.3, 1.0)),
+    (JarSpec(12.0, 19.5, 14.0), "box", (1.0, 1.0, 7.0)),       # a stick: it floats lying down
+    (JarSpec(16.0, 19.5, 14.0), "sphere", (11.5,)),
+])
+def test_the_lightest_admitted_floaters_settle_where_archimedes_says(client, jar, shape, dims):
+    least = min_mass_g_for(ObjectSpec("o", shape, dims, 1.0, (0.5, 0.5, 0.5)), jar)
+    spec = ObjectSpec("o", shape, dims, least, (0.5, 0.5, 0.5))
+    assert displaced_cm3(new_tank(client, jar), spec) == pytest.approx(least, rel=0.02)
