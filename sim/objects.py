@@ -530,6 +530,15 @@ def _parse_color(color, where: str) -> tuple[float, float, float]:
     return tuple(float(c) for c in color)
 
 
+def parse_object(item, jar=None, config: ObjectsConfig = ObjectsConfig()) -> ObjectSpec:
+    """One object in the objects file's format ({"shape", "color", "dims_cm", "mass_g"}, "name" optional) checked
+    as the file checks it, in the default jar unless one is given (a jar dict as in the file, or a JarSpec). For
+    the library's predict: one schema for an object, whether it comes in a file or in a call."""
+    jar = jar if isinstance(jar, JarSpec) else _parse_jar({} if jar is None else jar, config)
+    item = {"name": "object", **item} if isinstance(item, dict) else item
+    return _parse_object(item, "object", jar, config)
+
+
 def _parse_object(item, where: str, jar: JarSpec, config: ObjectsConfig) -> ObjectSpec:
     if not isinstance(item, dict):
         raise ObjectsFileError(f"{where}: must be an object with name, shape, color, dims_cm, mass_g")

@@ -190,7 +190,12 @@ class Experiment:
         return new
 
     def predict(self, measurement: dict) -> torch.Tensor:
-        """(B,) what each order's agent expects one object (a plain measurement dict) to displace, in cm^3."""
+        """(B,) what each order's agent expects one object to displace, in cm^3. The object: what the robot
+        perceives ({rgb, extent_cm, fill, mass_g}), or an object as the objects file gives it ({shape, color,
+        dims_cm, mass_g}; ValueError in one line when the file would refuse it), perceived exactly."""
+        if "dims_cm" in measurement:
+            from sim.objects import parse_object
+            measurement = parse_object(measurement).exact_measurement()
         with one_thread():   # a few small agents: a second thread only waits on a busy core (10 ms quiet, 600 busy)
             return self.agent.predict(stack_measurements([measurement] * len(self.orders)))
 
