@@ -9,6 +9,8 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 
 - paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
 - extended, extended -rules, extended -prior (its readout without the physics priors);
+- on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
+  rules off, what its readout can do when the knowledge is right;
 - kNN and MLP (benches/generalization.py's peers) on the perceived features the agent has (rgb, log extents, fill,
   log mass), and kNN+ and MLP+ with the extended model's derived features besides (log volume = fill x extents, and
   log mass over volume, which decides the fate).
@@ -56,6 +58,9 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
+# not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
+# eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
+GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0))}
 LIFE_CHECKS = (8, 24, 64, 230)
 
 
@@ -111,10 +116,12 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
         for n in checks:
             errs[n] = peer_errors(meas, ep["observed_cm3"], pmeas, truth, orders, n, seed_)[condition]
         return {"errors": errs}
-    model, ablate = MODELS[condition]
+    model, ablate, given = GIVEN[condition] if condition in GIVEN else (*MODELS[condition], None)
     cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)
+    if given is not None:
+        agent.hub.strength[:, :len(given)] = torch.tensor(given)
     errs = {}
     for t in range(n_train):
         obj = orders[:, t]
@@ -143,12 +150,12 @@ def main():
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
     ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
-                    help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS]))
+                    help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS, *GIVEN]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
     record_flag(ap)
     a = ap.parse_args()
     conditions = [c.strip() for c in a.conditions.split(",") if c.strip()]
-    if bad := [c for c in conditions if c not in MODELS and c not in PEERS]:
+    if bad := [c for c in conditions if c not in MODELS and c not in PEERS and c not in GIVEN]:
         ap.error(f"--conditions: unknown {', '.join(map(repr, bad))}")
     torch.set_num_threads(1)
     t0 = time.perf_counter()
