@@ -67,6 +67,11 @@ class IncrementalRules(nn.Module):
     def dominant(self) -> torch.Tensor:
         return (self.state == DOMINANT)[:, None].expand(-1, len(CONTEXTS), -1)
 
+    @property
+    def confounded(self) -> torch.Tensor:
+        """(B, P) all False: here Growth fires only on a clean comparison, so no dominance rests on a confound."""
+        return torch.zeros_like(self.state, dtype=torch.bool)
+
     def context_strength(self, dtype=torch.float32) -> torch.Tensor:
         return self.strength.to(dtype)[:, None].expand(-1, len(CONTEXTS), -1)
 

@@ -277,6 +277,15 @@ class CausalRules(nn.Module):
         return {p: {"state": STATES[int(self.state[b, i])], "certainty": round(float(cert[i]), 4)}
                 for i, p in enumerate(self.properties)}
 
+    @property
+    def confounded(self) -> torch.Tensor:
+        """(B, P) bool: dominant, but never shown alone. In no context where the property is dominant did it change
+        alone (besides the properties eliminated there) while the outcome moved: its dominance rests on comparisons
+        where it changed together with others (a minimal explanation of a confound), not on a clean Growth."""
+        excl = (self.eliminated.long() * self._weights).sum(-1)                      # (B, C)
+        alone = self._without(self.contradicted, excl)[..., self._weights]           # (B, C, P): {p} contradicted
+        return (self.state == DOMINANT) & ~(alone & self.dominant).any(1)
+
     def by_context(self, b: int = 0) -> dict:
         """Agent b's knowledge per context: {context: {"dominant": [...], "irrelevant": [...]}}."""
         return {c: {"dominant": [p for i, p in enumerate(self.properties) if self.dominant[b, k, i]],

@@ -266,3 +266,19 @@ def test_batch_answer_of_a_three_object_set_by_hand():
     # the lower triangle is not read: a pair is compared once
     delta_p[2, 0, C_] = True
     assert batch_knowledge(delta_p, delta_c, context).tolist() == state.tolist()
+
+
+def test_a_property_dominant_only_through_a_confound_is_flagged():
+    """Colour and weight changed together among sinkers and the outcome moved: both dominant, neither shown alone
+    (confounded). Weight alone then moves a sinker's outcome: weight explains both, colour drops out. Among floaters
+    colour and size change together: both dominant for floaters, confounded; weight stays shown (among sinkers)."""
+    rules = CausalRules()
+    fire(rules, dp(C, W), True, context=SINKING)
+    assert rules.state[0].tolist() == [DOMINANT, LIKELY_IRRELEVANT, LIKELY_IRRELEVANT, DOMINANT]
+    assert rules.confounded[0].tolist() == [True, False, False, True]
+    fire(rules, dp(W), True, context=SINKING)
+    assert rules.state[0].tolist() == [LIKELY_IRRELEVANT, LIKELY_IRRELEVANT, LIKELY_IRRELEVANT, DOMINANT]
+    assert not rules.confounded.any()
+    fire(rules, dp(C, SI), True, context=FLOATING)
+    assert rules.state[0].tolist() == [DOMINANT, LIKELY_IRRELEVANT, DOMINANT, DOMINANT]
+    assert rules.confounded[0].tolist() == [True, False, True, False]
