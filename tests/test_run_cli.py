@@ -245,3 +245,95 @@ def test_everything_before_the_first_line_runs_without_torch(tmp_path):
     r = subprocess.run([sys.executable, "-c", code, str(ROOT), str(tmp_path / "o")], capture_output=True, text=True,
                        timeout=60)
     assert r.returncode == 0 and r.stdout.strip() == "[]", (r.stdout, r.stderr)
+
+
+# -- the config: --config FILE.toml and --set KEY=VALUE, refused in one line before anything is written --------------
+
+def config_refused(tmp_path, *args) -> str:
+    out = tmp_path / "out"
+    r = run("--orders", "listed", "--out", str(out), *args)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
+    assert not out.exists()   # nothing written
+    return lines[0]
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--set", "rules.uncertain_decay=abc"],
+     ["train/run.py: error: --set rules.uncertain_decay=abc: rules.uncertain_decay takes a number (float), got 'abc'"]),
+    (["--set", "rules.bogus=1"], ["--set rules.bogus=1: unknown key rules.bogus (rules has: ", "uncertain_decay"]),
+    (["--set", "memory.max_episodes=1.5"], ["memory.max_episodes takes an integer (int), got 1.5"]),
+    (["--set", "recall_sharpness=[8]"], ["recall_sharpness takes a number (float), got [8]"]),
+    (["--set", "recall_sharpness=true"], ["recall_sharpness takes a number (float), got true"]),
+    (["--set", "recall_sharpness=0"], ["--set recall_sharpness=0: recall_sharpness:", "must be > 0"]),
+    (["--set", "world.mass_noise_g=-1"], ["world.mass_noise_g takes a number (float) >= 0, got -1.0"]),
+    (["--set", "world.tank.ball_diameter_cm=9"], ["world.tank.ball_diameter_cm", "does not fit"]),
+    (["--set", "sensor.mass_noise_g=5"], ["unknown key sensor.mass_noise_g", "did you mean world.mass_noise_g"]),
+    (["--set", "seed=-1"], ["--set seed=-1: seed takes an integer from 0 to 2**63 - 1, got -1"]),
+    (["--set", "rules.uncertain_decay"], ["--set rules.uncertain_decay: expected KEY=VALUE"]),
+])
+def test_a_bad_set_is_refused_in_one_line(tmp_path, args, words):
+    line = config_refused(tmp_path, *args)
+    assert all(w in line for w in words), line
+
+
+def test_a_bad_config_file_is_refused_in_one_line(tmp_path):
+    files = {"malformed.toml": ("[rules\nuncertain_decay = 1\n", ["not valid TOML", "line 1"]),
+             "unknown.toml": ("[rules]\nbogus = 1\n", ["unknown.toml: unknown key rules.bogus"]),
+             "wrong_type.toml": ("[memory]\nmax_episodes = 1.5\n", ["wrong_type.toml: memory.max_episodes takes an "
+                                                                     "integer (int), got 1.5"]),
+             "model.toml": ('model = "bayes"\n', ["model takes one of paper, extended, got 'bayes'"])}
+    for name, (text, words) in files.items():
+        f = tmp_path / name
+        f.write_text(text)
+        line = config_refused(tmp_path, "--config", str(f))
+        assert line.startswith(f"train/run.py: error: --config {f}") and all(w in line for w in words), line
+    line = config_refused(tmp_path, "--config", str(tmp_path / "missing.toml"))
+    assert line == f"train/run.py: error: --config {tmp_path / 'missing.toml'}: no such file"
+    # a flag's value is checked as the flag's: --ablate prior is no part of the file's paper model
+    (tmp_path / "paper.toml").write_text('model = "paper"\n')
+    line = config_refused(tmp_path, "--config", str(tmp_path / "paper.toml"), "--ablate", "prior")
+    assert "--ablate prior: not a part of the paper model" in line, line
+
+
+def test_help_states_the_configs_order():
+    r = run("--help")
+    text = " ".join(r.stdout.split())
+    assert r.returncode == 0 and "--config FILE.toml" in text and "--set KEY=VALUE" in text
+    assert "the defaults, the --config file, each --set in the order given, then --model, --ablate and --seed" in text
+    assert "when the file and a flag both give a value, the flag wins" in text
+
+
+def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
+    from train.summary import git_commit
+    objects = tmp_path / "objects.json"
+    objects.write_text(json.dumps({"train": [GOOD, obj(name="blue", color="blue")]}))
+    cfg = tmp_path / "c.toml"
+    cfg.write_text('model = "extended"\nrecall_sharpness = 8\n[rules]\nuncertain_decay = 0.5\n'
+                   '[world]\nmass_noise_g = 0.5\n')
+    out = tmp_path / "out"
+    args = ["--objects", str(objects), "--orders", "listed", "--out", str(out), "--config", str(cfg),
+            "--set", "rules.uncertain_decay=1.0", "--set", "memory.max_recalls=none", "--model", "paper"]
+    r = run(*args)
+    assert r.returncode == 0, r.stderr
+    summary = json.loads((out / "summary.json").read_text())
+    c = summary["config"]
+    assert summary["model"] == c["model"] == "paper"                 # --model over the file's extended
+    assert c["compare_with"] == 1                                    # so the paper model's, not the extended one's
+    assert c["recall_sharpness"] == 8.0                              # the file's
+    assert c["rules"]["uncertain_decay"] == 1.0                      # --set over the file
+    assert c["memory"]["max_recalls"] is None                        # "none"
+    assert c["world"]["mass_noise_g"] == 0.5 and c["world"]["tank"]["water"]["density"] == 1000.0
+    assert c["seed"] == summary["seed"] == 0 and c["memory"]["max_episodes"] == 2   # as the experiment ran it
+    assert json.loads((out / "config.json").read_text()) == c
+    assert summary["commit"] == git_commit() and summary["commit"] != ""
+    assert set(summary["versions"]) == {"torch", "pybullet", "numpy"}
+    # resuming with another config is refused, naming the first key that differs, and changes nothing
+    before = (out / "summary.json").read_text()
+    for other, word in ((["--set", "rules.uncertain_decay=0.9"], "rules.uncertain_decay"),
+                        (["--set", "world.mass_noise_g=1"], "world.mass_noise_g"),
+                        (["--model", "extended"], "model")):
+        r = run(*args, *other, "--resume")
+        lines = r.stderr.strip().splitlines()
+        assert r.returncode == 2 and len(lines) == 1 and word in lines[0] and "--resume" in lines[0], r.stderr
+        assert (out / "summary.json").read_text() == before

@@ -18,6 +18,10 @@ no pybullet client (a GUI simulates in-process), and a worker's torch runs on on
 waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
 writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
+Every world is built from the Physics' `world` config (sim.world.WorldConfig; None: the default). A world that
+cannot be built (a config the scene does not admit) fails every job with one WorldBuildError: raised by a pool's
+initializer, it would have its workers respawned for ever.
+
 Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
 imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
 """
@@ -31,21 +35,31 @@ import signal
 import sys
 import threading
 
-_WORLD = None  # one World per worker process
+_WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
 START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
 
 
-def _init(objects, seed: int) -> None:
+class WorldBuildError(RuntimeError):
+    """A worker could not build its world (a world config the scene does not admit); the message is one line."""
+
+
+def _init(objects, seed: int, config=None) -> None:
     global _WORLD
     signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since the fork (or exec)
     import torch
 
     torch.set_num_threads(1)  # one process per core
     from sim.world import World
-    _WORLD = World(objects, seed=seed)
+    try:
+        _WORLD = World(objects, config=config, seed=seed)
+    except Exception as e:  # noqa: BLE001  a pool whose initializer raises respawns its workers for ever: report it
+        lines = str(e).strip().splitlines()
+        _WORLD = WorldBuildError(f"the world could not be built: {type(e).__name__}: {lines[0] if lines else ''}")
 
 
 def _task(job: tuple):
+    if isinstance(_WORLD, WorldBuildError):
+        raise _WORLD
     return _simulate(_WORLD, job)
 
 
@@ -94,8 +108,9 @@ class Physics:
     """Drops, inspections and trial sequences for the runner. workers=1 (or a GUI) simulates in this process, when
     the results are asked for."""
 
-    def __init__(self, objects, seed: int = 0, gui: bool = False, workers: int | None = None):
-        self.objects, self.seed, self.gui = objects, seed, gui
+    def __init__(self, objects, seed: int = 0, gui: bool = False, workers: int | None = None, world=None):
+        """world: the sim.world.WorldConfig every world is built from (None: the default)."""
+        self.objects, self.seed, self.gui, self.world_config = objects, seed, gui, world
         self.workers = 1 if gui else (workers or cores())
         self._pool = self._world = None
 
@@ -105,7 +120,7 @@ class Physics:
             return
         if START_METHOD == "fork":
             import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
-        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed))
+        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config))
 
     def submit(self, jobs: list[tuple]):
         """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited
@@ -118,7 +133,12 @@ class Physics:
     def _here(self, job: tuple):
         if self._world is None:
             from sim.world import World
-            self._world = World(self.objects, gui=self.gui, seed=self.seed)
+            try:
+                self._world = World(self.objects, config=self.world_config, gui=self.gui, seed=self.seed)
+            except Exception as e:  # noqa: BLE001  as in a worker (_init): one error, whichever process builds it
+                lines = str(e).strip().splitlines()
+                raise WorldBuildError(f"the world could not be built: {type(e).__name__}: "
+                                      f"{lines[0] if lines else ''}") from e
         return _simulate(self._world, job)
 
     def run(self, jobs: list[tuple], progress=None, submitted=None) -> list:

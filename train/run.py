@@ -1,19 +1,26 @@
 """The experiment runner: cumulative causal learning in the pybullet world, with checkpoints and tensorboard.
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
+                        [--config FILE.toml] [--set KEY=VALUE ...]
                         [--model paper|extended] [--ablate rules|gating|prior ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
+The model's and the world's config (train/config.py): the defaults, then the --config file, then each --set in
+order, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed): a later value wins, so a
+flag wins over the file.
+
 Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic, checksummed),
-figure2.png, frames/ (with --frames) and summary.json (CONTRACTS.md). DIR belongs to one run at a time (a lock on
-DIR/.lock). Bad input: one line on stderr, exit code 2, nothing written. Ctrl-C: one line, exit code 130; a full disk
-or another write error: one line, exit code 1; either way the last checkpoint is intact and --resume continues.
+config.json (the run's config, at the start), figure2.png, frames/ (with --frames) and summary.json (CONTRACTS.md).
+DIR belongs to one run at a time (a lock on DIR/.lock). Bad input: one line on stderr, exit code 2, nothing written.
+Ctrl-C: one line, exit code 130; a full disk or another write error: one line, exit code 1; either way the last
+checkpoint is intact and --resume continues.
 """
 
 from __future__ import annotations
 
 import argparse
 import contextlib
+import copy
 import os
 import re
 import signal
@@ -34,6 +41,7 @@ FULL_TB_ORDERS = 16      # tensorboard run directories beyond this would drown a
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
 LOCK_NAME = ".lock"
+CONFIG_NAME = "config.json"   # the run's config, written when it starts (summary.json's `config`)
 MODELS = ("paper", "extended")                                        # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
@@ -50,10 +58,10 @@ class Parser(argparse.ArgumentParser):
 
 
 class Formatter(argparse.ArgumentDefaultsHelpFormatter):
-    """Shows defaults, except the None / False of options whose help says what they default to."""
+    """Shows defaults, except the None / False / [] of options whose help says what they default to."""
 
     def _get_help_string(self, action):
-        none = action.default is None or action.default is False
+        none = action.default is None or action.default is False or action.default == []
         return action.help if none else super()._get_help_string(action)
 
 
@@ -70,29 +78,47 @@ def seed_arg(text: str) -> int:
     return int(text)
 
 
-def _shown(text: str) -> str:
-    return repr(text if len(text) <= 40 else text[:40] + "...")
+def _shown(text: str, cut: int = 40) -> str:
+    return repr(text if len(text) <= cut else text[:cut] + "...")
+
+
+CONFIG_HELP = """The config: every field of the agent's (aesop_torch.agent.AgentConfig: top-level keys such as
+recall_sharpness, model, ablate, seed, and its parts encoder., hub., memory., rules.) and of the world's
+(sim.world.WorldConfig under world.: world.mass_noise_g, world.tank..., world.tank.water..., world.robot...,
+world.ik..., world.camera...). Applied in this order, a later value of a key replacing an earlier one: the
+defaults, the --config file, each --set in the order given, then --model, --ablate and --seed (shorthands for the
+keys model, ablate and seed): when the file and a flag both give a value, the flag wins. An unknown key, a value of
+the wrong type or out of range: one line, exit 2, nothing written. CONTRACTS.md has the details."""
 
 
 def parse_args(argv):
-    ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter)
+    ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter,
+                epilog=CONFIG_HELP)
     ap.add_argument("--objects", type=Path, default=None, metavar="FILE",
                     help="objects file: JSON, schema in CONTRACTS.md (default: sim/default_objects.json)")
     ap.add_argument("--orders", type=orders_arg, default=DEFAULT_ORDERS, metavar="N|listed|all",
                     help=f"N random orders of the train objects (N <= {MAX_ORDERS:,}), 'listed' (the file's order) "
                          f"or 'all' (every permutation: at most {MAX_ORDERS:,} orders, i.e. 9 objects)")
-    ap.add_argument("--seed", type=seed_arg, default=0, metavar="S",
+    ap.add_argument("--seed", type=seed_arg, default=None, metavar="S",
                     help="seed of the random orders, of the maps' developmental training and of the sensor noise: "
-                         "same seed, same run")
+                         "same seed, same run (default: 0, or the config's seed)")
     ap.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"output directory (default: {DEFAULT_OUT})")
     ap.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
-    ap.add_argument("--model", choices=MODELS, default="paper",
+    ap.add_argument("--config", type=Path, default=None, metavar="FILE.toml",
+                    help="the model's and the world's config as a TOML file: top-level keys are AgentConfig fields, "
+                         "tables its parts ([rules], [memory], ...) and the world's ([world], [world.tank], ...)")
+    ap.add_argument("--set", action="append", default=[], metavar="KEY=VALUE", dest="sets",
+                    help="set one config key (repeatable, applied after --config, in order), e.g. "
+                         "rules.uncertain_decay=1.0, memory.max_recalls=none, model=extended, world.mass_noise_g=5, "
+                         "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
+    ap.add_argument("--model", choices=MODELS, default=None,
                     help="paper: the paper's mechanism (incremental rules, knowledge-gated recall, a weighted average "
                          "of recalled rewards); extended: evidence-set rules with contexts and a readout fitted with "
-                         "the task's physics priors")
-    ap.add_argument("--ablate", action="append", default=[], metavar="PART",
-                    help="switch a part off (repeatable): rules (no rule fires), gating (the memory's cue ignores the "
-                         "strengths), prior (extended only: the readout without its physics priors)")
+                         "the task's physics priors (default: paper, or the config's model)")
+    ap.add_argument("--ablate", action="append", default=None, metavar="PART",
+                    help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
+                         "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
+                         "physics priors)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default="cached",
                     help="simulate each distinct object once (cached) or every episode of every order")
     ap.add_argument("--frames", action="store_true", help="save camera frames of each simulated drop")
@@ -102,10 +128,7 @@ def parse_args(argv):
         from sim.world import gui_unavailable
         if why := gui_unavailable():
             raise UsageError(f"--gui: {why}")
-    if bad := [p for p in a.ablate if p not in ABLATIONS[a.model]]:
-        raise UsageError(f"--ablate {bad[0]}: not a part of the {a.model} model (it has: "
-                         f"{', '.join(ABLATIONS[a.model])})")
-    a.ablate = list(dict.fromkeys(a.ablate))
+    gather_config(a)
     if a.resume and a.out is None:
         raise UsageError("--resume needs --out DIR (the run to continue)")
     if a.out is None:
@@ -113,6 +136,78 @@ def parse_args(argv):
     if a.objects is None:
         a.objects = DEFAULT_OBJECTS
     return a
+
+
+def gather_config(a) -> None:
+    """The config's overrides in the order they apply (--config, each --set, then --model, --ablate, --seed) as
+    a.overrides {dotted key: value}, where each came from as a.origins {key: "--set k=v" | "--config FILE" | flag},
+    and the run-level keys resolved into a.model, a.ablate, a.seed. Torch-free: the syntax, the file and these three
+    keys are checked here, before the first line; every other key against the dataclasses after it
+    (resolve_config)."""
+    from train.config import ConfigError, load_toml, parse_set, show
+
+    overrides, origins = {}, {}
+
+    def put(key, value, origin):
+        overrides.pop(key, None)   # re-inserted: the dicts' order is the order the values apply in
+        origins.pop(key, None)
+        overrides[key], origins[key] = value, origin
+
+    if a.config is not None:
+        try:
+            for key, value in load_toml(a.config).items():
+                put(key, value, f"--config {a.config}")
+        except ConfigError as e:
+            raise UsageError(f"--config {e}") from None
+    for text in a.sets:
+        try:
+            key, value = parse_set(text)
+        except ConfigError as e:
+            raise UsageError(f"--set {_shown(text, 100)[1:-1]}: {e}") from None
+        put(key, value, f"--set {_shown(text, 100)[1:-1]}")
+    if a.model is not None:
+        put("model", a.model, "--model")
+    if a.ablate is not None:
+        put("ablate", list(dict.fromkeys(a.ablate)), "--ablate")
+    if a.seed is not None:
+        put("seed", a.seed, "--seed")
+    a.overrides, a.origins = overrides, origins
+
+    model = overrides.get("model", "paper")
+    if model not in MODELS:   # a flag's is checked by argparse; the file's and --set's here (before the first line)
+        raise UsageError(f"{origins['model']}: model takes one of {', '.join(MODELS)}, got {show(model)}")
+    ablate = overrides.get("ablate", [])
+    if not isinstance(ablate, list) or not all(isinstance(p, str) for p in ablate):
+        raise UsageError(f"{origins['ablate']}: ablate takes an array of strings, got {show(ablate)}")
+    if bad := [p for p in ablate if p not in ABLATIONS[model]]:
+        where = f"--ablate {bad[0]}" if origins["ablate"] == "--ablate" else f"{origins['ablate']}: ablate {bad[0]}"
+        raise UsageError(f"{where}: not a part of the {model} model (it has: {', '.join(ABLATIONS[model])})")
+    seed = overrides.get("seed", 0)
+    if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < MAX_SEED:
+        raise UsageError(f"{origins['seed']}: seed takes an integer from 0 to 2**63 - 1, got {show(seed)}")
+    a.model, a.ablate, a.seed = model, list(dict.fromkeys(ablate)), seed
+
+
+def resolve_config(args, objects):
+    """The run's config (train.config.RunConfig: agent and world) from args.overrides, checked against the
+    dataclasses and against the objects (a world its workers could not build). Imports torch and the simulator:
+    after the first line. UsageError naming where the refused key came from."""
+    from train.config import ConfigError, check_world, resolve
+
+    try:
+        config = resolve(args.overrides)
+        check_world(config.world, objects)
+    except ConfigError as e:
+        raise UsageError(f"{_origin(args.origins, e.key)}{e}") from None
+    return config
+
+
+def _origin(origins: dict, key: str | None) -> str:
+    """"--set k=v: " for the key's last setting (or the last one under a table it names), else ""."""
+    if key is None:
+        return ""
+    hits = [k for k in origins if k == key or k.startswith(key + ".") or key.startswith(k + ".")]
+    return f"{origins[hits[-1]]}: " if hits else ""
 
 
 def load_objects_or_fail(path: Path):
@@ -232,10 +327,17 @@ def prepare(args, objects, n_orders: int, physics=None):
         orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
         if physics is not None:
             physics.start()
-        from aesop_torch.agent import AgentConfig
-        config = AgentConfig.named(args.model, ablate=tuple(args.ablate))
-        return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders, seed=args.seed,
-                          physics=args.physics, config=config), False, lock
+        # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.experiment)
+        config = copy.deepcopy(args.run_config.agent)
+        try:
+            return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders,
+                              seed=args.seed, physics=args.physics, config=config), False, lock
+        except (ValueError, TypeError, IndexError, RuntimeError, OverflowError) as e:
+            if not _agent_keys_set(args):
+                raise   # the defaults must build: a bug, with its traceback
+            lines = str(e).strip().splitlines()
+            raise UsageError(f"the agents cannot be built with this config ({type(e).__name__}: "
+                             f"{lines[0] if lines else ''})") from None
     except BaseException:
         os.close(lock)
         if created:   # refused or interrupted after all: leave nothing behind (rmdir: only if still empty)
@@ -244,6 +346,44 @@ def prepare(args, objects, n_orders: int, physics=None):
                 with contextlib.suppress(OSError):
                     d.rmdir()
         raise
+
+
+def write_config(config: dict, path: Path) -> None:
+    """config.json, atomically: a temporary file beside it, fsynced, renamed over it, as train.checkpoint writes
+    (not through its writer: tests/test_checkpoint.py counts that writer's calls to make the disk full at a chosen
+    checkpoint)."""
+    import json
+    import tempfile
+
+    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "w") as f:
+            f.write(json.dumps(config, indent=1) + "\n")
+            f.flush()
+            os.fsync(f.fileno())
+        umask = os.umask(0)
+        os.umask(umask)
+        os.chmod(tmp, 0o666 & ~umask)   # mkstemp makes it private; an output file is as readable as any other
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def world_kw(args) -> dict:
+    """Physics' `world` argument: the config's world when it is not the default one (the default needs none, and
+    the stand-ins of Physics in tests/test_checkpoint.py take none)."""
+    from sim.world import WorldConfig
+    from train.config import config_dict
+
+    world = args.run_config.world
+    return {} if config_dict(world) == config_dict(WorldConfig()) else {"world": world}
+
+
+def _agent_keys_set(args) -> bool:
+    """Whether the config sets an agent key beyond the run-level model, ablate and seed."""
+    return any(k not in ("model", "ablate", "seed") and not k.startswith("world.") and k != "world"
+               for k in args.overrides)
 
 
 def resume_experiment(args, objects):
@@ -262,7 +402,51 @@ def resume_experiment(args, objects):
     for key, value in wanted.items():
         if state["run"][key] != value:
             raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
+    check_same_config(args, objects, state["experiment"]["config"])
     return Experiment.from_state_dict(state["experiment"])
+
+
+def check_same_config(args, objects, stored_agent: dict) -> None:
+    """Refuse to resume with another config, naming the first key that differs: the agent's against the
+    checkpoint's (as the experiment ran it), the world's against DIR/config.json (none: a run from before it was
+    written, which built the default world)."""
+    import json
+
+    from aesop_torch.agent import AgentConfig
+    from sim.world import WorldConfig
+    from train.config import config_dict, first_difference, flatten, show
+
+    def refuse(key, here, there):
+        raise UsageError(f"--resume: the config's {key} differs from the interrupted run in {args.out} "
+                         f"({show(flatten(here).get(key))} here, {show(flatten(there).get(key))} there)")
+
+    here = config_dict(as_run(args.run_config.agent, len(objects.train), args.seed))
+    there = config_dict(AgentConfig.from_dict(stored_agent))   # fields added since it was written: their defaults
+    if key := first_difference(here, there):
+        refuse(key, here, there)
+    saved = args.out / CONFIG_NAME
+    if saved.is_file():
+        try:
+            there = json.loads(saved.read_text())["world"]
+            if not isinstance(there, dict):
+                raise TypeError
+        except (OSError, ValueError, KeyError, TypeError) as e:
+            raise UsageError(f"--resume: {saved} is damaged ({type(e).__name__}); nothing was changed") from None
+    else:
+        there = config_dict(WorldConfig())
+    here = {"world": config_dict(args.run_config.world)}
+    if key := first_difference(here, {"world": there}):
+        refuse(key, here, {"world": there})
+
+
+def as_run(agent, n_train: int, seed: int):
+    """A copy of an AgentConfig as train.experiment.Experiment runs it (its __post_init__): the run's seed, the
+    memory and the hub sized to the train objects."""
+    agent = copy.deepcopy(agent)
+    agent.seed = seed
+    agent.memory.max_episodes = min(agent.memory.max_episodes, n_train)
+    agent.hub.max_assemblies = min(agent.hub.max_assemblies, n_train)
+    return agent
 
 
 def main(argv=None) -> int:
@@ -279,7 +463,9 @@ def main(argv=None) -> int:
             from train.drawing import Drawer
             from train.physics import Physics
             _OPEN["drawer"] = Drawer()   # before torch's import: it imports the figure's modules on the idle core
-            physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui)   # forked in prepare
+            args.run_config = resolve_config(args, objects)   # imports torch and the simulator, checks every key
+            physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui,
+                                                 **world_kw(args))   # forked in prepare
             exp, resumed, lock = prepare(args, objects, n_orders, physics)
         except UsageError as e:
             _close_quietly()
@@ -333,8 +519,16 @@ def run(args, exp, objects, resumed: bool) -> int:
         return (f"the last checkpoint ({ckpt}, {saved['t']} of {exp.n_episodes} episodes) is intact: "
                 f"continue with the same flags and --resume --out {out}")
 
+    from train.physics import WorldBuildError
+
     try:
         return _run(args, exp, objects, resumed, out, ckpt, saved, t0)
+    except WorldBuildError as e:   # a world config the scene does not admit, found by the workers building it
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: error: {e} (check the config's world keys); {last_checkpoint()}",
+                  file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         with _sigint_ignored():
             _close_quietly()
@@ -380,16 +574,20 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.physics import Physics
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
+    from train.config import RunConfig, config_dict
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders, "model": args.model, "ablate": args.ablate}
+    # the whole config as the run uses it: the agents' as the experiment holds it (seed, buffers sized), the world's
+    config = config_dict(RunConfig(exp.config, args.run_config.world))
 
     def checkpoint():
         save_atomic({"run": run_meta, "experiment": exp.state_dict()}, ckpt)
         saved["t"] = exp.t
 
     if not resumed:
+        write_config(config, out / CONFIG_NAME)   # what --resume compares; before the first checkpoint
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
-    physics = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui)   # main() made it
+    physics = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui, **world_kw(args))   # main() made it
     _OPEN["physics"] = physics
     specs = {o.name: o for o in objects.train + objects.probe}
     # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
@@ -492,7 +690,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         for b, log in enumerate(logs):
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
-    summary = build_summary(exp, population)
+    summary = build_summary(exp, population, config)
     image = figure.get()
     for log in logs:
         log.writer.add_image("figure2", image, exp.n_episodes, dataformats="HWC")
@@ -500,7 +698,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     _OPEN["logs"] = []
     _close_quietly()   # the workers and the drawer: every result is in
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
-    print(f"\nwrote {out}/: summary.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
+    print(f"\nwrote {out}/: summary.json, config.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
     return 0

@@ -5,11 +5,27 @@ orders only (the runner runs those in detail), and a compact `population` block 
 knowledge (one letter per property: U unknown, L likely irrelevant, D dominant, I irrelevant) and final probe error,
 and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed
 over every order (null for a single order, where it is undefined).
+
+`config` is the run's whole config in the layout `--config` reads (train/config.py): the agents' as the experiment
+ran it and the world's; `commit` names the code (`git describe --always --dirty` in the repository, or "unknown"),
+`versions` the libraries that computed it.
 """
 
 from __future__ import annotations
 
+import importlib.metadata
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 from aesop_torch.rules import PROPERTIES, STATES
+
+ROOT = Path(__file__).resolve().parents[1]
+GIT_TIMEOUT_S = 5.0
+# a git environment that points elsewhere would describe another repository
+GIT_REDIRECTS = ("GIT_DIR", "GIT_WORK_TREE", "GIT_INDEX_FILE", "GIT_COMMON_DIR", "GIT_OBJECT_DIRECTORY")
+VERSIONED = ("torch", "pybullet", "numpy")
 
 FULL_RUNS = 64  # 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB
 
@@ -22,9 +38,44 @@ def knowledge_key(k: dict) -> str:
     return "".join(KNOWLEDGE_LETTERS[STATES.index(k[p]["state"])] for p in PROPERTIES)
 
 
-def build_summary(exp, population: dict | None = None) -> dict:
+def git_commit(root=ROOT, timeout: float = GIT_TIMEOUT_S) -> str:
+    """`git describe --always --dirty` run in `root` (the repository's root), or "unknown": outside a repository,
+    without git, past the timeout, on any error. Takes no lock (GIT_OPTIONAL_LOCKS=0: a describe --dirty would
+    otherwise refresh the index beside whoever else is using the repository)."""
+    env = {k: v for k, v in os.environ.items() if k not in GIT_REDIRECTS}
+    env["GIT_OPTIONAL_LOCKS"] = "0"
+    try:
+        r = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=root, env=env, capture_output=True,
+                           text=True, timeout=timeout, stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.SubprocessError, ValueError):
+        return "unknown"
+    out = r.stdout.strip()
+    return out if r.returncode == 0 and out and "\n" not in out else "unknown"
+
+
+def versions() -> dict:
+    """{"torch", "pybullet", "numpy": version}: the module's __version__ (pybullet has none: its distribution's),
+    "unknown" when neither is found."""
+    out = {}
+    for name in VERSIONED:
+        v = getattr(sys.modules.get(name), "__version__", None)
+        if v is None:
+            try:
+                v = importlib.metadata.version(name)
+            except importlib.metadata.PackageNotFoundError:
+                v = "unknown"
+        out[name] = str(v)
+    return out
+
+
+def build_summary(exp, population: dict | None = None, config: dict | None = None) -> dict:
     """exp: the Experiment run in detail (at most FULL_RUNS orders); population: train.population's result for
-    every order when there are more."""
+    every order when there are more; config: the run's config as train.config.config_dict gives it (None: the
+    experiment's agents with the default world)."""
+    if config is None:
+        from sim.world import WorldConfig
+        from train.config import RunConfig, config_dict
+        config = config_dict(RunConfig(exp.config, WorldConfig()))
     names = exp.train_names
     finals = exp.final_knowledge()
     runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b]}
@@ -35,6 +86,7 @@ def build_summary(exp, population: dict | None = None) -> dict:
     # one order cannot show independence of the order: undefined there (null), never a vacuous true
     independent = len(set(keys)) == 1 if len(keys) > 1 else None
     summary = {"seed": exp.seed, "physics": exp.physics, "model": exp.config.model, "ablate": list(exp.config.ablate),
+               "commit": git_commit(), "versions": versions(), "config": config,
                "runs": runs, "order_independent": independent}
     if population:
         summary["population"] = {
