@@ -123,6 +123,10 @@ class AgentConfig:
     # same reach, grasp and drop) or take one of a few codes, so the object's code is what sets one episode apart;
     # from one 5-neuron row, exact recall from the object cue held to ~32 episodes, from 12 2-neuron rows it holds
     # to 230 (benches/memory_capacity.py). Sparse 2-of-50 rows are the memory's best case (random episodes: 275).
+    # A full hub refuses a new object (HubConfig.when_full, the library's default, kept here): a run is sized for its
+    # objects (train.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
+    # big for its agents. A longer life sets both when_full to "forget_oldest" or "forget_weakest" (Agent._encode:
+    # an object's assembly and its episodes leave together).
     hub: HubConfig = field(default_factory=lambda: HubConfig(rows=len(OBJECT_ROWS), assembly_size=2))
     # the sheet's rows as the agent uses them (OBJECT_ROWS cue the recall), and the reward's coarse and fine units
     # each on a row of its own (k = 1: its inhibitory pool lets exactly one win, so a recalled reward is always
@@ -145,6 +149,7 @@ class AgentConfig:
     # a long life learns and predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects:
     # 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not
     # a bound for speed
+    # A full memory refuses (MemoryConfig.when_full, the library's default, kept here for the hub's reason above)
     memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
                                                                       cue_power=16.0, misses=2, max_recalls=None))
     rules: RulesConfig = field(default_factory=RulesConfig)
@@ -786,7 +791,15 @@ class Agent(nn.Module):
                      torch.as_tensor(goal_before).reshape(B), torch.as_tensor(goal_after).reshape(B), fate, mask)
 
     def _encode(self, acts, present, observed, goal_before, goal_after, fate, mask) -> None:
-        """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet."""
+        """One-shot: the object's hub assembly (reused if the hub already knows it), then the episode sheet.
+
+        A full hub or memory does as its config's when_full says. A new object in a full hub frees an assembly
+        (ObjectHub.make_room, each assembly's uses counted as the stored episodes on it: one that no episode uses
+        any more goes first), and the episodes stored with the freed assembly leave the memory: its neurons will
+        code for other objects, so those episodes could never be cued right again. A full memory then lets an
+        episode go (EpisodicMemory.make_room); the assembly of an object's last episode stays until the hub needs
+        the room, so the object is still known (its name too) and a new episode of it reuses it. Under "refuse" a
+        full hub or memory raises before anything is stored."""
         best, assembly = self.hub.match(acts, self.cue_present(present))
         known = best >= self.config.hub.match_threshold
         if known.any():
@@ -801,6 +814,12 @@ class Agent(nn.Module):
                                                    self.hub.strength[:, None, :P])
             known &= ~(changed | unclear)[:, 0].any(-1)
         new = mask & ~known
+        if (new & (self.hub.n_assemblies >= self.hub.config.max_assemblies)).any():
+            held = self._assemblies(self.memory.patterns)                          # (B, M, N) each episode's object
+            # the episodes on the freed assemblies leave (a stored episode's object rows are never all empty)
+            self.memory.forget((held == self.hub.make_room(new, held)[:, None]).all(-1))
+        if self.memory.config.when_full == "refuse":
+            self.memory.make_room(mask)   # raises if full, before the hub stores the object
         fresh = self.hub.allocate(acts, present, new)
         assembly = torch.where(new[:, None], fresh, assembly)
         B, cfg = self.batch, self.config.memory
@@ -841,6 +860,9 @@ class Agent(nn.Module):
             same_name = self.name_match(acts[:, w, :self.maps[WORD_MAP].n_units]).gather(1, i[:, None])[:, 0]
             new = named & ((best < self.config.hub.match_threshold) | (same_name < NAME_SAME))
             if new.any():
+                if (new & (self.hub.n_assemblies >= self.hub.config.max_assemblies)).any():   # as in `_encode`
+                    held = self._assemblies(self.memory.patterns)
+                    self.memory.forget((held == self.hub.make_room(new, held)[:, None]).all(-1))
                 self.hub.allocate(acts, present, new)
 
     def knowledge(self, b: int = 0) -> dict:

@@ -8,7 +8,8 @@ ASSEMBLY of `assembly_size` hub neurons (a sparse 5-of-50 code): the memory reca
 one neuron per object would give only 50 codes with no graded overlap. Storing an object sets W = 1 from each map's
 winner to each assembly neuron. W' (hub -> maps) is W transposed; the paper's "connection strength between the
 object hub and the map" is `strength`, one number per agent and map, gating both directions; the learning rules
-edit it in place.
+edit it in place. A full hub refuses a new object, or first frees its oldest assembly or its weakest (the least
+used, the most like another object) (HubConfig.when_full, `ObjectHub.make_room`).
 
 All state has a leading batch dim B: B independent agents (e.g. one per presentation order) share one tensor
 program.
@@ -21,6 +22,8 @@ from dataclasses import dataclass
 
 import torch
 from torch import nn
+
+from .memory import WHEN_FULL
 
 N_NEURONS = 50  # one row of the episodic memory sheet
 
@@ -37,6 +40,12 @@ class HubConfig:
     rows: int = 1
     # the memory holds ~230 episodes, so an agent never needs more distinct objects than that
     max_assemblies: int = 230
+    # what `allocate` does for an agent whose hub holds max_assemblies objects already (memory.WHEN_FULL): "refuse"
+    # raises and stores nothing; "forget_oldest" frees the oldest assembly, "forget_weakest" of the least used ones
+    # the most like another stored object (`ObjectHub.make_room`; an assembly its owner holds no reference to goes
+    # first either way). The default refuses, as the memory's does: a library hub never drops an object its caller
+    # did not ask it to drop, and a run sized for its objects never needs to.
+    when_full: str = "refuse"
     # `match` above this: the object is already known and its assembly is reused. The same object seen again scores
     # 1 (relative activity) or a hair less (a remeasurement within the senses' noise); with graded storage a
     # similar but different object scores high too (one property moved by one map unit: ~0.95 with weight at the
@@ -53,6 +62,10 @@ class HubConfig:
     # ~2.5 units either side of the winner, enough for a population read-out to land within ~1 % of a unit
     # between them (SelfOrganizingMap.decode), while W stays sparse
     store_floor: float = 0.05
+
+    def __post_init__(self):
+        if self.when_full not in WHEN_FULL:
+            raise ValueError(f"HubConfig.when_full must be one of {', '.join(WHEN_FULL)}, got {self.when_full!r}")
 
 
 def _relative(acts: torch.Tensor) -> torch.Tensor:
@@ -243,7 +256,9 @@ class ObjectHub(nn.Module):
         retro-activation be decoded as a population (SelfOrganizingMap.decode) between units, not only at the
         winner's codebook vector. Picks the assembly by `_pick` (ties broken at random by an
         optional generator, else to the lower index). Returns the new assemblies (B, N) bool (empty where mask is
-        False)."""
+        False). A masked agent whose hub is full first makes room as HubConfig.when_full says (`make_room`, with no
+        reference counts: the hub alone does not know its objects' uses; an owner that does, as the agent does
+        with its episodes, calls `make_room` first); under "refuse", ValueError, storing nothing for any agent."""
         B, A, P, U = self.branches.shape
         graded = winners.is_floating_point()
         if (winners.shape != ((B, P, U) if graded else (B, P))) or present.shape != (B, P) or mask.shape != (B,):
@@ -261,8 +276,7 @@ class ObjectHub(nn.Module):
                 raise ValueError(f"winners out of range for the map sizes {self.sizes.tolist()}")
             pattern = torch.zeros(B, P, U, dtype=self.branches.dtype, device=self.branches.device)
             pattern.scatter_(2, winners.clamp(0, U - 1)[:, :, None], 1.0)
-        if (mask & (self.n_assemblies >= self.config.max_assemblies)).any():
-            raise ValueError(f"object hub full: {self.config.max_assemblies} assemblies stored")
+        self.make_room(mask)
         assembly = self._pick(generator) & mask[:, None]
         self.usage += assembly.long()
         slot = self.n_assemblies.clamp(max=self.config.max_assemblies - 1)
@@ -275,6 +289,104 @@ class ObjectHub(nn.Module):
         self.n_assemblies += mask.long()
         return assembly
 
+    @torch.no_grad()
+    def make_room(self, mask: torch.Tensor, held: torch.Tensor | None = None) -> torch.Tensor:
+        """For the agents in mask (B,) whose hub is full, one assembly is freed, as HubConfig.when_full says; returns
+        the freed assemblies (B, N) bool (empty for the other agents), so that an owner can drop what it bound to
+        them (the agent: the episodes stored with that object, which could never be cued right again).
+
+        held (B, M, N) bool: the codes the owner still refers to (the agent: its stored episodes' object rows; rows
+        of empty slots all False). An assembly's uses are the held codes equal to it.
+        - "refuse": ValueError naming the limit and the field to change; nothing changes.
+        - "forget_oldest": an assembly with no use, the oldest of them, else the oldest assembly.
+        - "forget_weakest": of the least used assemblies (an unused one first), the object most redundant with
+          another stored object (`similarity`: how well each would match the other, through the pathway strengths
+          as they are), the older of a pair. Why: an object with more uses is one the agent met more often or
+          that surprised it (a contradiction is stored again on the object's own assembly), and freeing an assembly
+          takes all of its uses with it; of equal uses, one whose look-alike stays loses least (what the agent knew
+          of it, the look-alike still cues), and a property the rules found irrelevant tells no two objects apart.
+          The memory's forget_weakest is the same idea (EpisodicMemory.make_room). The hub keeps no count of its
+          own (uses live with the owner): without held every assembly counts one use.
+        Freeing an unused assembly first loses nothing the owner recalls (a name bound to it goes with it: the word
+        map's pattern is one of its branches). The survivors keep their order (`forget`)."""
+        c, B = self.config, self.n_assemblies.shape[0]
+        mask = mask.to(device=self.n_assemblies.device, dtype=torch.bool)
+        if tuple(mask.shape) != (B,):
+            raise ValueError(f"mask shape {tuple(mask.shape)}, expected ({B},)")
+        freed = torch.zeros_like(self.usage, dtype=torch.bool)
+        full = mask & (self.n_assemblies >= c.max_assemblies)
+        if not full.any():
+            return freed
+        if c.when_full == "refuse":
+            raise ValueError(f"object hub full: agents {full.nonzero().flatten().tolist()} already hold "
+                             f"max_assemblies={c.max_assemblies} objects (nothing stored); raise "
+                             f"HubConfig.max_assemblies or set HubConfig.when_full to 'forget_oldest' or "
+                             f"'forget_weakest'")
+        rows = full.nonzero().flatten()
+        stored = self.assemblies[rows]                                                # (F, A, N), every slot filled
+        uses = torch.ones(stored.shape[:2], dtype=torch.long, device=stored.device)
+        if held is not None:
+            if held.ndim != 3 or held.shape[0] != B or held.shape[2] != stored.shape[2]:
+                raise ValueError(f"held must be (B, M, N) with B = {B}, N = {stored.shape[2]}, got "
+                                 f"{tuple(held.shape)}")
+            h, a = held.to(stored.device)[rows].float(), stored.float()
+            shared = torch.bmm(h, a.transpose(1, 2))                                   # (F, M, A), exact counts
+            same = (shared == h.sum(-1, keepdim=True)) & (shared == a.sum(-1)[:, None, :])
+            uses = same.sum(1)
+        if c.when_full == "forget_oldest":
+            victim = (uses > 0).long().argmin(1)                                      # the first unused, else slot 0
+        else:
+            sim = self.similarity(rows)
+            sim.diagonal(dim1=1, dim2=2).fill_(-1.0)                                   # not with itself
+            least = uses == uses.min(1, keepdim=True).values
+            victim = torch.where(least, sim.amax(2), torch.full_like(sim[:, 0], -2.0)).argmax(1)   # the oldest of a tie
+        drop = torch.zeros_like(self.graded)
+        drop[rows, victim] = True
+        freed[rows] = stored[torch.arange(rows.numel(), device=rows.device), victim]
+        self.forget(drop)
+        return freed
+
+    def similarity(self, rows: torch.Tensor | None = None) -> torch.Tensor:
+        """(B, A, A) (or the agents `rows`' (F, A, A)): how alike each two stored objects are, the score `object_match`
+        gives one's stored patterns shown as the other's: sum_m s_m d_abm / sum_m s_m over the maps both were stored
+        with, d_abm = W_am . W_bm / max(W_am . W_am, W_bm . W_bm) (symmetric; 1 for the same pattern, 0 for bumps
+        that do not overlap), s_m the pathway strengths. 0 for an empty slot."""
+        rows = torch.arange(self.graded.shape[0], device=self.graded.device) if rows is None else rows
+        br, norm = self.branches[rows], self.branch_norm[rows]                          # (F, A, P, U), (F, A, P)
+        dot = torch.einsum("fapu,fbpu->fabp", br, br)
+        d = (dot / torch.maximum(norm[:, :, None], norm[:, None, :]).clamp_min(1e-12)).clamp(0.0, 1.0)
+        gate = self.strength[rows][:, None, None, :] * ((norm[:, :, None] > 0) & (norm[:, None, :] > 0))
+        den = gate.sum(-1)
+        return torch.where(den > 0, (gate * d).sum(-1) / den.clamp_min(1e-12), torch.zeros_like(den))
+
+    @torch.no_grad()
+    def forget(self, drop: torch.Tensor) -> None:
+        """Agent b's stored objects in the slots where drop (B, max_assemblies) bool is True leave the hub (slots at
+        or past n_assemblies are ignored): their assemblies, branches (a name bound to one goes with it) and their
+        neurons' usage. The survivors keep their order, moved down to slots 0 .. n_assemblies - 1 with the rest
+        zero: the hub is then exactly one that only ever stored the survivors (in that order, with the pathway
+        strengths as they are). Other agents are untouched."""
+        B, A = self.graded.shape
+        drop = drop.to(device=self.graded.device, dtype=torch.bool)
+        if tuple(drop.shape) != (B, A):
+            raise ValueError(f"drop shape {tuple(drop.shape)}, expected ({B}, {A})")
+        slots = torch.arange(A, device=drop.device)
+        drop = drop & (slots < self.n_assemblies[:, None])
+        rows = drop.any(1).nonzero().flatten()
+        if rows.numel() == 0:
+            return
+        d = drop[rows]
+        self.usage[rows] -= (self.assemblies[rows] & d[:, :, None]).sum(1)
+        order = torch.sort(d.to(torch.uint8), dim=1, stable=True).indices              # kept first, in order
+        n = self.n_assemblies[rows] - d.sum(1)
+        live = slots < n[:, None]                                                       # (F, A)
+        for name in ("assemblies", "branches", "branch_norm", "graded"):
+            buf = getattr(self, name)
+            part = buf[rows]
+            tail = [1] * (part.ndim - 2)
+            kept = part.gather(1, order.view(*order.shape, *tail).expand_as(part))
+            buf[rows] = torch.where(live.view(*live.shape, *tail), kept, torch.zeros_like(kept))
+        self.n_assemblies[rows] = n
 
     def _pick(self, generator: torch.Generator | None) -> torch.Tensor:
         """The next assembly (B, N) bool, chosen neuron by neuron so that codes stay apart as objects multiply: each

@@ -39,6 +39,10 @@ stored pattern has its term in X d masked; any other (a spurious fixed point, ~1
 agent's episodes) is subtracted as Z^T (Z d). A recall leaves out the rows that hold one code in every stored
 episode (they settle at it and are no evidence) and writes that code back. `weights(b)` and `mean_activity(b)` give
 the dense network of one agent for inspection and tests.
+
+A full memory refuses one more episode, or lets its oldest or its most redundant one go (MemoryConfig.when_full,
+`make_room`). Forgetting moves the survivors down in their order (`forget`), so the stored episodes are always the
+slots 0 .. count - 1, oldest first, and the memory is exactly one that only ever stored them.
 """
 
 from __future__ import annotations
@@ -53,6 +57,10 @@ from torch import nn
 # Divisive normalisation floor: sum_j d_j^2 of any real state is >= ~1 (a 5-neuron cue alone gives ~4.5), so 1e-3
 # only guards against 0/0 and keeps float32 rounding in h (~1e-5) from being amplified.
 _EPS = 1e-3
+
+
+# what a full memory (MemoryConfig.when_full) or a full object hub (hub.HubConfig.when_full) does with one more
+WHEN_FULL = ("refuse", "forget_oldest", "forget_weakest")
 
 
 def _default_row_k() -> tuple[int, ...]:
@@ -86,6 +94,13 @@ class MemoryConfig:
     # >= 99 % exact recall of random episodes up to 275, so the paper's 230 is kept, with a margin. (At 230 the
     # buffer is 230 kB per agent: a run of many agents that stores a few episodes each should lower it.)
     max_episodes: int = 230
+    # what `store` does for an agent whose memory holds max_episodes already (WHEN_FULL): "refuse" raises and
+    # stores nothing; "forget_oldest" lets the oldest stored episode go; "forget_weakest" the one most redundant
+    # with the others (see `EpisodicMemory.make_room`). The default refuses: a library memory never loses an
+    # episode its caller did not ask it to lose, and a run sized for its objects never needs to (the runner can
+    # check the sizes up front). Forgetting is exact either way (the weights are a sum over the stored patterns):
+    # the memory is then bit for bit one that only ever stored the survivors, in their order.
+    when_full: str = "refuse"
     # clamped (pattern completion) and free (object row released) iterations; each cue stops at its own fixed
     # point. At 230 random episodes completion settles in ~5 clamped steps (exact recall is the same with a cap of
     # 4, 8 or 12), a cue still moving after 8 goes on in the free phase; free running ends in ~2 steps.
@@ -122,6 +137,8 @@ class MemoryConfig:
     chunk_elements: int = 1 << 25
 
     def __post_init__(self):
+        if self.when_full not in WHEN_FULL:
+            raise ValueError(f"MemoryConfig.when_full must be one of {', '.join(WHEN_FULL)}, got {self.when_full!r}")
         self.row_k = tuple(int(k) for k in self.row_k)
         if len(self.row_k) != self.rows:
             raise ValueError(f"MemoryConfig.row_k has {len(self.row_k)} entries, expected rows={self.rows}")
@@ -367,8 +384,8 @@ class EpisodicMemory(nn.Module):
         Each row r of an episode holds either nothing or exactly `config.row_k[r]` active neurons (the row's
         inhibitory pool lets no more fire in recall): by default 5 on the object row (a hub assembly) and 2 on every
         other row (a 2-hot event code); the cue rows must not all be empty, since they are what cues the episode.
-        ValueError otherwise. Raises RuntimeError, storing nothing, when a masked agent's memory is full: nothing is
-        ever overwritten."""
+        ValueError otherwise. A masked agent whose memory is full first makes room as MemoryConfig.when_full says
+        (`make_room`): under "refuse", RuntimeError, storing nothing for any agent."""
         c, B = self.config, self.batch
         if tuple(episode.shape) != (B, c.rows, c.cols):
             raise ValueError(f"episode shape {tuple(episode.shape)}, expected ({B}, {c.rows}, {c.cols})")
@@ -388,13 +405,86 @@ class EpisodicMemory(nn.Module):
                              f"expected 0 or {int(self.row_k[r])}")
         if (mask & (n[:, list(c.cue_rows)].sum(-1) == 0)).any():
             raise ValueError(f"episode has empty cue rows {c.cue_rows}: it could never be cued")
-        full = mask & (self.count >= c.max_episodes)
-        if full.any():
-            raise RuntimeError(f"episodic memory full: agents {full.nonzero().flatten().tolist()} already hold "
-                               f"max_episodes={c.max_episodes} episodes (nothing stored)")
+        self.make_room(mask, episode)
         idx = mask.nonzero().flatten()
         self.patterns[idx, self.count[idx]] = episode[idx]
         self.count[idx] += 1
+
+    @torch.no_grad()
+    def make_room(self, mask: torch.Tensor, incoming: torch.Tensor | None = None) -> torch.Tensor:
+        """For the agents in mask (B,) whose memory is full, one stored episode leaves, as MemoryConfig.when_full
+        says; returns the episodes that left (B, rows, cols) bool (empty for the other agents). incoming (B, rows,
+        cols): the episodes about to be stored (what "forget_weakest" weighs the stored ones against), or None.
+
+        - "refuse": RuntimeError naming the limit and the field to change; nothing changes.
+        - "forget_oldest": the episode stored first (slot 0).
+        - "forget_weakest": the episode most redundant with the others: the one that shares the most active neurons
+          with another episode (stored, or the one coming in); of a tie (two episodes as alike as each other), the
+          older. Why: the memory is a covariance network, so what an episode adds is what the others do not already
+          hold. One whose near-twin stays loses least when it goes (the same object stored again after a
+          contradiction: its older outcome leaves, its newer one comes in), and overlapping patterns are what the
+          rule stores worst (each pulls the other's recall), so the most overlapping is also the one whose leaving
+          relieves the others most. It needs nothing beyond the stored patterns: a recall still changes nothing (a
+          probe of an agent, a goal recall through a view of its memory, a shared recall cache stay what they
+          are) and the state dict is as before. Not chosen: the episode recalled least often. A count kept at
+          recall makes every query learn (probing an agent would change what it later forgets), and it starves the
+          newest episode, which has had no chance to be recalled yet: each new one would push out the one stored
+          just before it.
+
+        The survivors keep their order (`forget`): the memory is exactly one that stored only them."""
+        c, B = self.config, self.batch
+        mask = mask.to(device=self.count.device, dtype=torch.bool)
+        if tuple(mask.shape) != (B,):
+            raise ValueError(f"mask shape {tuple(mask.shape)}, expected ({B},)")
+        left = torch.zeros(B, c.rows, c.cols, dtype=torch.bool, device=self.patterns.device)
+        full = mask & (self.count >= c.max_episodes)
+        if not full.any():
+            return left
+        if c.when_full == "refuse":
+            raise RuntimeError(f"episodic memory full: agents {full.nonzero().flatten().tolist()} already hold "
+                               f"max_episodes={c.max_episodes} episodes (nothing stored); raise "
+                               f"MemoryConfig.max_episodes or set MemoryConfig.when_full to 'forget_oldest' or "
+                               f"'forget_weakest'")
+        rows = full.nonzero().flatten()
+        victim = torch.zeros(rows.numel(), dtype=torch.long, device=rows.device)     # forget_oldest: slot 0
+        if c.when_full == "forget_weakest":
+            # a full memory holds max_episodes episodes: (F, M, N) against themselves and the incoming ones
+            x = self.patterns[rows].flatten(2).float()
+            shared = torch.bmm(x, x.transpose(1, 2))                                   # exact: counts <= rows*cols
+            shared.diagonal(dim1=1, dim2=2).fill_(-1.0)                                # not with itself
+            most = shared.amax(2)
+            if incoming is not None:
+                new = incoming.to(self.patterns.device)[rows].flatten(1).float()
+                most = torch.maximum(most, torch.bmm(x, new[:, :, None])[:, :, 0])
+            victim = most.argmax(1)            # the first of the most redundant: the oldest of a tie
+        drop = torch.zeros_like(self.patterns[:, :, 0, 0])
+        drop[rows, victim] = True
+        left[rows] = self.patterns[rows, victim]
+        self.forget(drop)
+        return left
+
+    @torch.no_grad()
+    def forget(self, drop: torch.Tensor) -> None:
+        """Agent b's stored episodes in the slots where drop (B, max_episodes) bool is True leave its memory (slots
+        at or past its count are ignored). The survivors keep their order, moved down to slots 0.. count - 1 with
+        the rest zero, so the memory is bit for bit one that only ever stored the survivors in that order: its
+        weights (a sum over the stored patterns) lose exactly the forgotten terms, and its recalls are that
+        memory's. Other agents are untouched."""
+        c, B, M = self.config, self.batch, self.patterns.shape[1]
+        drop = drop.to(device=self.patterns.device, dtype=torch.bool)
+        if tuple(drop.shape) != (B, M):
+            raise ValueError(f"drop shape {tuple(drop.shape)}, expected ({B}, {M})")
+        slots = torch.arange(M, device=drop.device)
+        drop = drop & (slots < self.count[:, None])
+        rows = drop.any(1).nonzero().flatten()
+        if rows.numel() == 0:
+            return
+        d = drop[rows]
+        order = torch.sort(d.to(torch.uint8), dim=1, stable=True).indices             # kept first, in order
+        kept = self.patterns[rows].gather(1, order[:, :, None, None].expand(-1, -1, c.rows, c.cols))
+        n = self.count[rows] - d.sum(1)
+        self.patterns[rows] = kept & (slots < n[:, None])[:, :, None, None]
+        self.count[rows] = n
 
     @torch.no_grad()
     def reset(self, mask: torch.Tensor | None = None) -> None:
