@@ -60,6 +60,9 @@ def test_paper_episodes_1_to_3_with_physics(paper_run):
     assert e3["predicted_cm3"] == pytest.approx(365, abs=3) and e3["observed_cm3"] < 30 and e3["encoded"]
     assert e3["rules"] == {"color": "S", "shape": "U", "size": "U", "weight": "G"}
     assert not e3["goal_reached"]
+    assert run["confounded"] == []                          # the paper model's Growth fires only on a clean change
+    assert run["knowledge_by_context"]["sinking"] == run["knowledge_by_context"]["floating"]   # it has no contexts
+    assert "color" in run["knowledge_by_context"]["mixed"]["irrelevant"]
     k = run["final_knowledge"]
     assert k["weight"]["state"] == "dominant" and k["shape"]["state"] == "likely_irrelevant"
     assert summary["order_independent"] is None            # one order: undefined, not a vacuous true
@@ -243,3 +246,26 @@ def test_an_object_in_the_files_schema_is_predicted_as_its_measurement(tmp_path)
     objects.write_text('{"train": [{"name": "x", "shape": "cube", "color": "red", "dims_cm": [5], "mass_g": 0}]}')
     r = subprocess.run(ask + ["--objects", str(objects)], capture_output=True, text=True, timeout=60)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "mass_g" in r.stderr
+
+
+def test_summary_says_what_the_extended_knowledge_rests_on():
+    """The extended model's knowledge by context (size dominant among sinkers, weight among floaters on the default
+    set) and its confounded properties reach summary.json and the console's table."""
+    from aesop_torch.agent import AgentConfig
+    from sim.objects import load_objects
+    from train.experiment import Experiment, closed_form_outcomes
+    from train.summary import build_summary, knowledge_table
+    objects = load_objects(ROOT / "sim" / "default_objects.json")
+    outcomes, probes = closed_form_outcomes(objects)
+    exp = Experiment([o.name for o in objects.train], [], [list(range(len(objects.train)))],
+                     config=AgentConfig.extended(), outcomes=outcomes, probes={})
+    while not exp.done:
+        exp.step(lambda name, b, t: outcomes[name])
+    summary = build_summary(exp)
+    run = summary["runs"][0]
+    by = run["knowledge_by_context"]
+    assert "size" in by["sinking"]["dominant"] and "weight" in by["floating"]["dominant"]
+    assert by["sinking"] != by["floating"]
+    shown = exp.agent.rules.confounded[0].tolist()
+    assert run["confounded"] == [p for p, c in zip(("color", "shape", "size", "weight"), shown) if c]
+    assert "by context: floating: dominant" in knowledge_table(summary)

@@ -222,6 +222,15 @@ class Experiment:
     def final_knowledge(self) -> list[dict]:
         return [self.agent.knowledge(b) for b in range(len(self.orders))]
 
+    def knowledge_as_it_is(self) -> list[dict]:
+        """Per order, what the knowledge rests on: {"by_context": rules.by_context (dominant and irrelevant among
+        floaters, sinkers, and one of each; the paper model has no contexts, its three lists are the same),
+        "confounded": the dominant properties never shown alone (rules.confounded)}."""
+        rules = self.agent.rules
+        return [{"by_context": rules.by_context(b),
+                 "confounded": [p for i, p in enumerate(PROPERTIES) if rules.confounded[b, i]]}
+                for b in range(len(self.orders))]
+
     def imagine(self, words: str) -> dict:
         """What each order's agent retro-activates for `words` with no object in view (Agent.imagine), as plain
         values: {"words", "orders": [per order: known, score, runner_up, and when known the colour (rgb, nearest

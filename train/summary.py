@@ -78,7 +78,9 @@ def build_summary(exp, population: dict | None = None, config: dict | None = Non
         config = config_dict(RunConfig(exp.config, WorldConfig()))
     names = exp.train_names
     finals = exp.final_knowledge()
-    runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b]}
+    resting = exp.knowledge_as_it_is()
+    runs = [{"order": [names[i] for i in exp.orders[b]], "episodes": exp.records[b], "final_knowledge": finals[b],
+             "knowledge_by_context": resting[b]["by_context"], "confounded": resting[b]["confounded"]}
             for b in range(len(exp.orders))]
     for b, trials in enumerate(getattr(exp, "trials", None) or []):   # only when the objects file has trials
         runs[b]["trials"] = trials
@@ -107,11 +109,20 @@ def knowledge_table(summary: dict) -> str:
     for i, run in enumerate(runs[:12]):
         errs = [e["probe_rel_error"] for e in run["episodes"] if e["probe_rel_error"] is not None]
         err = f"{100 * errs[0]:.1f}% -> {100 * errs[-1]:.1f}%" if errs else "n/a"
-        cells = "".join(f"{k['state']} ({k['certainty']:.2f})".ljust(26)
-                        for k in (run["final_knowledge"][p] for p in PROPERTIES))
+        confounded = run.get("confounded", [])
+        cells = "".join((f"{k['state']} ({k['certainty']:.2f})" + (" conf." if p in confounded else "")).ljust(26)
+                        for p, k in ((p, run["final_knowledge"][p]) for p in PROPERTIES))
         lines.append(f"{i + 1:<7}{cells}{err}")
+        if i == 0 and summary.get("model") == "extended":
+            by = run.get("knowledge_by_context", {})
+            lines.append("       by context: " + "; ".join(
+                f"{c}: dominant {', '.join(v['dominant']) or '-'}, irrelevant {', '.join(v['irrelevant']) or '-'}"
+                for c, v in by.items()))
     if len(runs) > 12:
         lines.append(f"... {len(runs) - 12} more orders in summary.json")
+    if any(run.get("confounded") for run in runs):
+        lines.append("conf.: dominant only through comparisons where it changed together with other properties, "
+                     "never shown alone")
     trials = [t for run in runs for t in run.get("trials", [])]
     if trials:
         n = len(trials)
