@@ -349,25 +349,11 @@ def prepare(args, objects, n_orders: int, physics=None):
 
 
 def write_config(config: dict, path: Path) -> None:
-    """config.json, atomically: a temporary file beside it, fsynced, renamed over it, as train.checkpoint writes
-    (not through its writer: tests/test_checkpoint.py counts that writer's calls to make the disk full at a chosen
-    checkpoint)."""
+    """config.json, atomically (train.checkpoint's writer: a temporary file beside it, fsynced, renamed over it)."""
     import json
-    import tempfile
 
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "w") as f:
-            f.write(json.dumps(config, indent=1) + "\n")
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)   # mkstemp makes it private; an output file is as readable as any other
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    from train.checkpoint import write_text_atomic
+    write_text_atomic(json.dumps(config, indent=1) + "\n", path)
 
 
 def world_kw(args) -> dict:
