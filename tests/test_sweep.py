@@ -1,0 +1,323 @@
+"""train/sweep.py and train/report.py: a sweep on Ray gives the rows its cells give in-process, an interrupted sweep
+resumes to the same table, a bad sweep file is refused in one line, and the report's figures are the table's.
+One local Ray instance (2 CPUs) serves the whole module: starting one takes seconds."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pyarrow as pa
+import pytest
+
+from train import report as report_mod
+from train import sweep
+
+ROOT = Path(__file__).resolve().parents[1]
+
+TINY = """
+description = "2 conditions x 2 generated sets of 4 objects x 2 orders"
+[[conditions]]
+name = "paper"
+model = "paper"
+
+[[conditions]]
+name = "extended -prior"
+model = "extended"
+ablate = ["prior"]
+
+[[sets]]
+name = "fours"
+generate = { seeds = [5, 7], train = 4, probe = 3, pairs = false }
+orders = 2
+checks = [1, 3, 4]
+"""
+
+
+@pytest.fixture(scope="module")
+def local_ray():
+    import ray
+    started = sweep.start_ray(None, 2)
+    yield
+    if started:
+        ray.shutdown()
+
+
+def _write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+def _sorted(table):
+    return table.sort_by([("cell", "ascending"), ("order", "ascending"), ("episode", "ascending")])
+
+
+def _direct(path: Path):
+    """The sweep's cells run here, in this process, without Ray."""
+    _, cells = sweep.load_sweep(path)
+    return _sorted(pa.concat_tables([sweep.run_cell(c["spec"], c["objects"]) for c in cells]))
+
+
+def test_a_sweep_on_ray_gives_the_rows_of_its_cells_run_in_process(tmp_path, local_ray, capsys):
+    path = _write(tmp_path, TINY)
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
+    out = tmp_path / "out"
+    files = sorted((out / "cells").glob("*"))
+    assert len(files) == 4 and all(f.suffix == ".parquet" for f in files)   # no temporary file left
+    got = _sorted(sweep.read_cells(out))
+    assert got.schema == sweep.schema()
+    assert got.num_rows == 2 * 2 * 2 * 4                                  # conditions x sets x orders x episodes
+    assert got.equals(_direct(path))                                     # bit for bit
+    rows = got.to_pylist()
+    assert {r["condition"] for r in rows} == {"paper", "extended -prior"}
+    assert {r["set"] for r in rows} == {"5", "6"} and {r["seed"] for r in rows} == {5, 6}
+    assert {r["ablate"] for r in rows} == {"", "prior"}
+    checked = [r for r in rows if r["probe_rel_error"] is not None]
+    assert {r["episode"] for r in checked} == {1, 3, 4} and len(checked) == 2 * 2 * 2 * 3
+    assert all(len(r["knowledge"]) == 4 and set(r["knowledge"]) <= set("ULDI") for r in rows)
+    assert all(r["knowledge"] == r["color"] + r["shape"] + r["size"] + r["weight"] for r in rows)
+    assert all(r["predicted_cm3"] is None for r in rows if r["episode"] == 1)   # nothing to recall yet
+    recorded = json.loads((out / "sweep.json").read_text())
+    assert recorded["spec"]["conditions"][1]["ablate"] == ["prior"]
+    # a finished sweep resumed runs nothing, and says so
+    capsys.readouterr()
+    assert sweep.main([str(path), "--out", str(out), "--resume"]) == 0
+    assert "4 on disk, 0 to run" in capsys.readouterr().out
+
+
+def test_an_interrupted_sweep_resumes_to_the_same_table(tmp_path, local_ray, capsys):
+    path = _write(tmp_path, TINY)
+    out = tmp_path / "out"
+
+    def ctrl_c_after_two(cell, seen=[]):
+        seen.append(cell)
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    assert sweep.main([str(path), "--out", str(out)], on_cell=ctrl_c_after_two) == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err[-1] == f"train/sweep.py: interrupted: 2 of 4 cell(s) on disk in {out / 'cells'} (--resume runs the rest)"
+    first = {p.name: p.stat().st_mtime_ns for p in (out / "cells").glob("*.parquet")}
+    assert len(first) == 2
+    # a new sweep into the same DIR is refused; so is a resume with another spec
+    assert sweep.main([str(path), "--out", str(out)]) == 2
+    other = _write(tmp_path, TINY.replace("orders = 2", "orders = 3"), "other.toml")
+    assert sweep.main([str(other), "--out", str(out), "--resume"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 2 and "already holds files" in err[0]
+    assert err[1].endswith("holds another sweep (sets[0].orders differs); give another --out")
+    assert sweep.main([str(path), "--out", str(out), "--resume"]) == 0
+    assert "2 on disk, 2 to run" in capsys.readouterr().out
+    assert {p.name: p.stat().st_mtime_ns for p in (out / "cells").glob("*.parquet") if p.name in first} == first
+    assert _sorted(sweep.read_cells(out)).equals(_direct(path))
+
+
+def test_ctrl_c_ends_a_sweep_in_one_line_with_its_finished_cells_on_disk(tmp_path):
+    """A real SIGINT to the sweep's process group, as a terminal's Ctrl-C sends it, while Ray runs cells."""
+    import os
+    import signal
+    import time
+    path = _write(tmp_path, TINY.replace("seeds = [5, 7]", "seeds = [5, 45]"))
+    out = tmp_path / "out"
+    p = subprocess.Popen([sys.executable, "train/sweep.py", str(path), "--out", str(out), "--workers", "2"], cwd=ROOT,
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 90
+        while not list((out / "cells").glob("*.parquet")) and time.monotonic() < deadline and p.poll() is None:
+            time.sleep(0.05)
+        os.killpg(p.pid, signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            p.kill()
+    done = list((out / "cells").glob("*.parquet"))
+    assert p.returncode == 130, stderr
+    assert stderr.strip().splitlines()[-1] == (f"train/sweep.py: interrupted: {len(done)} of 80 cell(s) on disk in "
+                                               f"{out / 'cells'} (--resume runs the rest)")
+    assert 1 <= len(done) < 80 and "Traceback" not in stderr
+    assert sorted(p.name for p in (out / "cells").iterdir()) == sorted(p.name for p in done)   # no half file
+    assert sweep.read_cells(out).num_rows == len(done) * 2 * 4
+
+
+BAD = {
+    "malformed TOML": ("[[conditions]\nname = 1", "malformed TOML"),
+    "an unknown key": (TINY.replace('model = "paper"', 'modle = "paper"'), "unknown key 'modle'"),
+    "a wrong type": (TINY.replace("train = 4", 'train = "4"'), "generate.train: expected a whole number"),
+    "a bool for a number": (TINY.replace("orders = 2", "orders = true"), "orders: expected a whole number"),
+    "an unknown model": (TINY.replace('model = "paper"', 'model = "papier"'), "is not a model"),
+    "prior on paper": (TINY.replace('model = "extended"', 'model = "paper"'),
+                       '"prior" is no ablation of the paper model'),
+    "an unknown world": ('world = "moon"\n' + TINY, "is not a world"),
+    "a missing objects file": (TINY.replace("generate = { seeds = [5, 7], train = 4, probe = 3, pairs = false }",
+                                            'files = ["no_such.json"]'), "no_such.json: cannot read"),
+    "an empty list of files": (TINY.replace("generate = { seeds = [5, 7], train = 4, probe = 3, pairs = false }",
+                                            "files = []"), "files: the list is empty"),
+    "no conditions": ("conditions = []\n" + TINY[TINY.index("[[sets]]"):], "conditions: the list is empty"),
+    "empty checks": (TINY.replace("checks = [1, 3, 4]", "checks = []"), "checks: the list is empty"),
+    "a check past the set": (TINY.replace("checks = [1, 3, 4]", "checks = [1, 5]"), "must be in 1..4, got 5"),
+    "an empty seed range": (TINY.replace("seeds = [5, 7]", "seeds = [7, 7]"), "the range [7, 7) is empty"),
+    "pairs on 4 objects": (TINY.replace("pairs = false", "pairs = true"), "--pairs needs n_train >= 6"),
+    "two conditions of one name": (TINY.replace('name = "extended -prior"', 'name = "paper"'),
+                                   "'paper' is the name of another condition"),
+}
+
+
+@pytest.mark.parametrize("case", list(BAD))
+def test_a_bad_sweep_file_is_refused_in_one_line_before_anything_is_written(tmp_path, case, capsys):
+    text, words = BAD[case]
+    path = _write(tmp_path, text)
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
+    captured = capsys.readouterr()
+    lines = captured.err.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith(f"train/sweep.py: error: {path}: ") and words in lines[0], lines
+    assert captured.out == "" and not (tmp_path / "out").exists()
+
+
+def test_the_command_line_refuses_a_bad_sweep_file_in_one_line(tmp_path):
+    path = _write(tmp_path, BAD["prior on paper"][0])
+    r = subprocess.run([sys.executable, "train/sweep.py", str(path), "--out", str(tmp_path / "out")], cwd=ROOT,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 2 and r.stdout == "" and not (tmp_path / "out").exists()
+    assert r.stderr.count("\n") == 1 and '"prior" is no ablation of the paper model' in r.stderr, r.stderr
+
+
+def test_a_physics_world_is_simulated_once_and_shared_by_the_conditions(tmp_path, local_ray):
+    text = TINY.replace("seeds = [5, 7], train = 4, probe = 3, pairs = false",
+                        'seeds = [5, 6], train = 4, probe = 1, pairs = false, jar = "default"')
+    path = _write(tmp_path, 'world = "physics"\n' + text.replace("orders = 2", "orders = 1"))
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
+    got = _sorted(sweep.read_cells(tmp_path / "out"))
+    assert got.num_rows == 2 * 4 and set(got.column("world").to_pylist()) == {"physics"}
+    by = {}
+    for r in got.to_pylist():
+        by.setdefault(r["condition"], {})[r["object"]] = r["observed_cm3"]
+    assert by["paper"] == by["extended -prior"]                       # one world for both conditions
+    _, cells = sweep.load_sweep(path)
+    direct = sweep.run_cell(cells[0]["spec"], cells[0]["objects"])    # simulated again, here: the same outcomes
+    assert {o: v for o, v in zip(direct.column("object").to_pylist(), direct.column("observed_cm3").to_pylist())} \
+        == by[cells[0]["spec"]["condition"]["name"]]
+
+
+OVERRIDDEN = TINY + """
+[[conditions]]
+name = "paper, no decay"
+model = "paper"
+overrides = { rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8 }
+"""
+
+
+def test_overrides_reach_the_agent_and_the_rows(tmp_path):
+    pytest.importorskip("train.config")
+    spec, cells = sweep.load_sweep(_write(tmp_path, OVERRIDDEN))
+    cond = spec["conditions"][2]
+    assert cond["overrides"] == {"recall_sharpness": 8, "rules.uncertain_decay": 1.0}   # nested or dotted: one form
+    cfg = sweep.agent_config(cond, 5, 4)
+    assert (cfg.rules.uncertain_decay, cfg.recall_sharpness, cfg.seed, cfg.memory.max_episodes) == (1.0, 8, 5, 4)
+    # the buffers are sized to the set first, so an override may size them otherwise
+    cfg = sweep.agent_config({**cond, "overrides": {"memory.max_episodes": 2}}, 5, 4)
+    assert cfg.memory.max_episodes == 2 and cfg.hub.max_assemblies == 4
+    cell = next(c for c in cells if c["spec"]["condition"]["name"] == "paper, no decay")
+    table = sweep.run_cell(cell["spec"], cell["objects"])
+    assert set(table.column("overrides").to_pylist()) == {'{"recall_sharpness": 8, "rules.uncertain_decay": 1.0}'}
+    assert set(table.column("cell").to_pylist()) == {cell["id"]}
+
+
+@pytest.mark.parametrize("override, words", [
+    ('"rules.uncertain_decy" = 1.0', "overrides: unknown key rules.uncertain_decy"),
+    ('"rules.uncertain_decay" = "slow"', "overrides: rules.uncertain_decay takes a number"),
+    ('"world.mass_noise_g" = 2.0', "overrides: world.mass_noise_g is a key of the world's config"),
+    ("seed = 3", "overrides: 'seed' is set by a set's seeds"),
+    ('model = "extended"', "overrides: 'model' is set by the condition's model"),
+])
+def test_a_bad_override_is_refused_in_one_line(tmp_path, capsys, override, words):
+    pytest.importorskip("train.config")
+    path = _write(tmp_path, OVERRIDDEN.replace('rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8', override))
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and "conditions[2] 'paper, no decay': " + words in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_cells_are_named_by_a_stable_hash_of_their_spec(tmp_path):
+    _, cells = sweep.load_sweep(_write(tmp_path, TINY))
+    assert len({c["id"] for c in cells}) == 4
+    spec = {"format": 1, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
+                                                                "overrides": {}},
+            "set_group": "fours", "set": "5", "source": {"generate": {"seed": 5, "train": 4, "probe": 3,
+                                                                      "pairs": False, "jar": "random"}},
+            "n_train": 4, "n_probe": 3, "seed": 5, "orders": "2", "checks": [1, 3, 4]}
+    assert spec in [c["spec"] for c in cells]
+    assert sweep.cell_id(spec) == "adf20a285d537c59"   # fixed: a resumed sweep finds the cells an older run wrote
+
+
+def _hand_made_table():
+    """Two conditions on one set group: 2 cells x 2 orders x 2 episodes each, probe errors at episode 2."""
+    rows = []
+    for cond, errs, finals in (("a", [0.1, 0.2, 0.3, 0.4], [["IUUD", "IUUD"], ["IUUD", "UUUD"]]),
+                               ("b", [1.0, 2.0, 3.0, 5.0], [["UUUU", "UUUU"], ["UUUU", "UUUU"]])):
+        for c in range(2):
+            for o in range(2):
+                for ep in (1, 2):
+                    k = finals[c][o] if ep == 2 else "UUUU"
+                    rows.append({"cell": f"{cond}{c}", "condition": cond, "model": "paper", "ablate": "",
+                                 "overrides": "{}", "world": "closed_form", "set_group": "g", "set": str(c),
+                                 "generator_seed": c, "seed": c, "n_train": 2, "n_probe": 3, "n_orders": 2,
+                                 "order": o, "episode": ep, "object": f"t{ep}", "predicted_cm3": None,
+                                 "observed_cm3": 1.0, "archimedes_cm3": 1.0, "sank": False, "goal_reached": False,
+                                 "rules": "SSSS", "knowledge": k, "color": k[0], "shape": k[1], "size": k[2],
+                                 "weight": k[3], "probe_rel_error": errs[2 * c + o] if ep == 2 else None})
+    return pa.Table.from_pylist(rows, schema=sweep.schema())
+
+
+def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_table(tmp_path, capsys):
+    table = _hand_made_table()
+    (tmp_path / "cells").mkdir()
+    for cell in ("a0", "a1", "b0", "b1"):
+        import pyarrow.compute as pc
+        sweep.write_cell(tmp_path, cell, table.filter(pc.equal(table.column("cell"), cell)))
+    assert report_mod.main([str(tmp_path)]) == 0
+    csv = (tmp_path / "report.csv").read_text().splitlines()
+    assert csv == ["condition,set_group,episode,n,error_median,error_q25,error_q75,cells,order_agreement,"
+                   "colour_irrelevant",
+                   "a,g,2,4,0.250000,0.175000,0.325000,2,0.5000,0.7500",
+                   "b,g,2,4,2.500000,1.750000,3.500000,2,1.0000,0.0000"]
+    md = (tmp_path / "report.md").read_text()
+    assert "| a | 0.2500 (0.175-0.325) |" in md and "| b | 2.5000 (1.750-3.500) |" in md
+    assert "| a | g | 2 | 0.500 | 0.750 |" in md
+    for png in ("errors.png", "agreement.png"):
+        data = (tmp_path / png).read_bytes()
+        assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000
+    # and as a script; a DIR without cells is refused in one line
+    r = subprocess.run([sys.executable, "train/report.py", str(tmp_path / "cells")], cwd=ROOT, capture_output=True,
+                       text=True, timeout=60)
+    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "holds no finished cells" in r.stderr
+
+
+def test_the_constants_kept_without_torch_are_the_agents():
+    from aesop_torch.agent import ABLATIONS, MODELS
+    from aesop_torch.rules import PROPERTIES, RULE_NAMES
+    from train.summary import KNOWLEDGE_LETTERS
+    assert sweep.MODELS == MODELS and sweep.ABLATIONS == ABLATIONS
+    assert sweep.PROPERTY_COLUMNS == PROPERTIES and sweep.RULE_LETTERS == "".join(RULE_NAMES)
+    assert sweep.KNOWLEDGE_LETTERS == KNOWLEDGE_LETTERS
+
+
+def test_the_example_in_docs_and_the_shipped_sweep_files_load():
+    import tomllib
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    doc = tomllib.loads(text.split("```toml\n")[1].split("```")[0])
+    try:
+        import train.config  # noqa: F401
+    except ModuleNotFoundError:   # overrides need train/config.py
+        for c in doc["conditions"]:
+            c.pop("overrides", None)
+    spec, cells = sweep._resolve(doc, ROOT / "docs")
+    assert [c["name"] for c in spec["conditions"]] == ["paper", "paper -rules", "paper, no uncertainty decay"]
+    assert len(cells) == 3 * (10 + 4)
+    for f in ("examples/tiny.toml", "examples/ablation.toml", "benches/ablation.toml", "benches/generalization.toml",
+              "benches/learning_curve.toml"):
+        assert sweep.load_sweep(ROOT / f)[1]
+    _, cells = sweep.load_sweep(ROOT / "benches" / "ablation.toml")
+    assert len(cells) == 6 * (30 + 10 + 8)
