@@ -740,19 +740,9 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
 
 
 def _sigint_ignored():
-    import contextlib
-    import threading
-
-    @contextlib.contextmanager
-    def ignored():
-        main = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-        try:
-            yield
-        finally:
-            if main:
-                signal.signal(signal.SIGINT, previous)
-    return ignored()
+    """The runner's guard: a second Ctrl-C must not interrupt the clean-up after the first."""
+    from train.run import _sigint_ignored as guard
+    return guard()
 
 
 def main(argv=None, on_cell=None) -> int:
