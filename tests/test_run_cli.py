@@ -337,3 +337,22 @@ def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2 and len(lines) == 1 and word in lines[0] and "--resume" in lines[0], r.stderr
         assert (out / "summary.json").read_text() == before
+
+
+@pytest.mark.parametrize("kind", ["link", "dangling", "fifo"])
+def test_a_lock_that_is_not_a_regular_file_is_refused_without_touching_anything(tmp_path, kind):
+    """DIR/.lock as a symbolic link (to a file, or to nothing) or a FIFO: opened without following links or blocking,
+    refused in one line; the link's target is neither overwritten nor created, and the run does not hang."""
+    out, target = tmp_path / "out", tmp_path / "target.txt"
+    out.mkdir()
+    if kind == "fifo":
+        os.mkfifo(out / ".lock")
+    else:
+        if kind == "link":
+            target.write_text("precious\n")
+        os.symlink(target, out / ".lock")
+    r = run("--out", str(out))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and ".lock" in lines[0] and "Traceback" not in r.stderr, r.stderr
+    assert (target.read_text() == "precious\n") if kind == "link" else not target.exists()
+    assert sorted(p.name for p in out.iterdir()) == [".lock"]

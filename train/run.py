@@ -21,9 +21,11 @@ from __future__ import annotations
 import argparse
 import contextlib
 import copy
+import errno
 import os
 import re
 import signal
+import stat
 import sys
 import threading
 import time
@@ -265,10 +267,12 @@ def _lock_holder(out: Path) -> str | None:
     import fcntl
 
     try:
-        fd = os.open(out / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC)
+        fd = os.open(out / LOCK_NAME, os.O_RDONLY | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK)
     except OSError:
         return None
     try:
+        if not stat.S_ISREG(os.fstat(fd).st_mode):   # not a lock of ours (a FIFO would block a read)
+            return None
         fcntl.flock(fd, fcntl.LOCK_SH | fcntl.LOCK_NB)
         return None
     except BlockingIOError:
@@ -283,7 +287,17 @@ def lock_out(out: Path) -> int:
     import fcntl
 
     out.mkdir(parents=True, exist_ok=True)
-    fd = os.open(out / LOCK_NAME, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o644)
+    lock = out / LOCK_NAME
+    # never through a link (it would write the pid into, or create, a file elsewhere) and never blocking (a FIFO)
+    try:
+        fd = os.open(lock, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC | os.O_NOFOLLOW | os.O_NONBLOCK, 0o644)
+    except OSError as e:
+        if e.errno == errno.ELOOP:
+            raise UsageError(f"--out {out}: {lock} is a symbolic link, not a run's lock; remove it") from None
+        raise
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise UsageError(f"--out {out}: {lock} is not a regular file, not a run's lock; remove it")
     try:
         fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except BlockingIOError:
