@@ -356,3 +356,10 @@ def test_a_lock_that_is_not_a_regular_file_is_refused_without_touching_anything(
     assert r.returncode == 2 and len(lines) == 1 and ".lock" in lines[0] and "Traceback" not in r.stderr, r.stderr
     assert (target.read_text() == "precious\n") if kind == "link" else not target.exists()
     assert sorted(p.name for p in out.iterdir()) == [".lock"]
+
+
+def test_the_runners_tables_of_models_and_ablations_are_the_agents():
+    """train/run.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported."""
+    import train.run as runner
+    from aesop_torch.agent import ABLATIONS, MODELS
+    assert runner.MODELS == MODELS and runner.ABLATIONS == ABLATIONS

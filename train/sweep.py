@@ -41,8 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROG = "train/sweep.py"
 FORMAT = 1               # in every cell's hash: bumped when the rows a spec gives change
 WORLDS = ("closed_form", "closed_form_exact", "physics")
-MODELS = ("paper", "extended")                                        # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}   # and .ABLATIONS
+from train.run import ABLATIONS, MODELS  # noqa: E402   the runner's copy of the agent's tables, without torch
 MAX_CELLS = 1_000_000
 MAX_SEEDS = 1_000_000    # seeds of one range
 MAX_ORDERS = 100_000     # orders of one cell (one batched agent)
@@ -82,6 +81,18 @@ def _int(v, where: str, lo: int, hi: int) -> int:
     if not lo <= v <= hi:
         raise SweepError(f"{where}: must be in {lo}..{hi}, got {v}")
     return v
+
+
+def _entry_name(entry: dict, where: str, names: set, kind: str) -> tuple[str, str]:
+    """A [[conditions]] or [[sets]] entry's name, present and unique among `names` (added to them), and the place
+    to name in its errors from now on."""
+    if "name" not in entry:
+        raise SweepError(f"{where}: no 'name'")
+    name = _name(entry["name"], where + ".name")
+    if name in names:
+        raise SweepError(f"{where}.name: {name!r} is the name of another {kind}")
+    names.add(name)
+    return name, f"{where} {name!r}"
 
 
 def _name(v, where: str) -> str:
@@ -175,13 +186,7 @@ def agent_config(condition: dict, seed: int, n_train: int):
 
 def _condition(c, where: str, names: set) -> dict:
     _keys(c, CONDITION_KEYS, where)
-    if "name" not in c:
-        raise SweepError(f"{where}: no 'name'")
-    name = _name(c["name"], where + ".name")
-    if name in names:
-        raise SweepError(f"{where}.name: {name!r} is the name of another condition")
-    names.add(name)
-    where = f"{where} {name!r}"
+    name, where = _entry_name(c, where, names, "condition")
     if "model" not in c:
         raise SweepError(f"{where}: no 'model' (one of: {', '.join(MODELS)})")
     model = c["model"]
@@ -228,13 +233,7 @@ def _set(s, where: str, base: Path, names: set) -> tuple[dict, list[dict]]:
     from sim.make_objects import generate
     from sim.objects import ObjectsConfig, ObjectsFileError, load_objects
     _keys(s, SET_KEYS, where)
-    if "name" not in s:
-        raise SweepError(f"{where}: no 'name'")
-    name = _name(s["name"], where + ".name")
-    if name in names:
-        raise SweepError(f"{where}.name: {name!r} is the name of another set")
-    names.add(name)
-    where = f"{where} {name!r}"
+    name, where = _entry_name(s, where, names, "set")
     if ("files" in s) == ("generate" in s):
         raise SweepError(f"{where}: give either 'files' (objects files) or 'generate' (a generator spec)")
     run_seeds = _seeds(s["seeds"], where + ".seeds") if "seeds" in s else None
