@@ -8,7 +8,9 @@ Part 1 runs populations of 1, 100, 10,000 random orders and all 40,320 orders of
 (prefix sharing, merged states) and its peer, the plain trie (`merge=False`: every trie node stepped, as the
 population did before states were merged), alternately, R times each (default 3), medians. It prints order-episodes
 per second (orders x 8 episodes / wall, final probe predictions included), the agent-steps each ran, the ratio, and
-whether both gave the same knowledge and rounded probe errors for every order. Part 2 runs
+whether both gave the same knowledge and rounded probe errors for every order (curves=False: final results only),
+then all orders once more with curves=True (the probe error after every episode, as the runner asks for Figure 2)
+and its wall time beside ours. Part 2 runs
 `python train/run.py --orders all --out <tmpdir>` end to end (physics of the drops and probe inspections, 64 orders
 in detail, the population, summary and figure, goal trials) in a subprocess for the default file and for the
 default file with a ninth train object (a blue heavy sphere: 9! = 362,880 orders), and prints the wall times and peak
@@ -60,13 +62,18 @@ def population_section(repeats: int) -> None:
         for _ in range(repeats):
             for merge in (True, False):
                 t0 = time.perf_counter()
-                runs[merge] = run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), merge=merge)
+                runs[merge] = run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), merge=merge,
+                                             curves=False)
                 walls[merge].append(time.perf_counter() - t0)
         ours, plain = statistics.median(walls[True]), statistics.median(walls[False])
         same = all(runs[True][k] == runs[False][k] for k in ("final_knowledge", "final_probe_rel_error"))
         print(f"{len(orders):>7} {ours:>7.2f} {len(orders) * n / ours:>11.0f} {runs[True]['agent_steps']:>7} "
               f"{plain:>13.2f} {len(orders) * n / plain:>11.0f} {runs[False]['agent_steps']:>7} {plain / ours:>8.1f}x  "
               f"{'yes' if same else 'NO'}", flush=True)
+    t0 = time.perf_counter()
+    run_population(train, probe_names, orders, outcomes, probes, AgentConfig(), curves=True)
+    print(f"{len(orders)} orders with curves=True (Figure 2's per-episode errors), once: "
+          f"{time.perf_counter() - t0:.2f} s wall (ours above: {ours:.2f} s)", flush=True)
     print(f"peak memory of this process: {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1e6:.2f} GB")
 
 

@@ -101,3 +101,37 @@ def test_the_senses_floor_is_the_median_error_of_the_best_sensed_reading():
     assert math.isclose(senses_floor({"a": floater, "b": sinker}), (0.5 / 10.5 + 0.0) / 2)
     assert math.isclose(senses_floor({"a": floater}), 0.047619, rel_tol=1e-4)
     assert senses_floor({}) is None
+
+
+def test_a_population_run_bands_the_error_over_all_its_orders_and_states_the_disagreement(tmp_path):
+    """Two orders run in detail, four in the population: the right panel's median and bands are the counted
+    quantiles of the population's four orders, not the two runs'. By hand, episode 1: errors 0.1, 0.1, 0.1, 0.5
+    (positions 0..3, q at 3 q): median 0.1, 75 % 0.1 + 0.25 x 0.4 = 0.2, 90 % 0.1 + 0.7 x 0.4 = 0.38; episode 2:
+    0.02 for all four."""
+    runs = [[episode(0.9), episode(0.9, color="dominant")], [episode(0.8), episode(0.8)]]
+    population = {"orders": 4, "agree_fraction": 0.75, "most_common_knowledge": "ILDD",
+                  "curves": {"probe_rel_error": [{"values": [0.5, 0.1], "counts": [1, 3], "none": 0},
+                                                 {"values": [0.02], "counts": [4], "none": 0}]}}
+    left, right = figure2(runs, floor=0.01, population=population).axes
+    med = curves(right)
+    assert len(med) == 1 and np.allclose(med[0].get_ydata(), [10.0, 2.0])          # percent
+    bands = [c for c in right.collections if isinstance(c, PolyCollection)]
+    tops = sorted(max(y for x, y in c.get_paths()[0].vertices if x == 1) for c in bands)
+    bottoms = [min(y for x, y in c.get_paths()[0].vertices if x == 1) for c in bands]
+    assert np.allclose(tops, [20.0, 38.0]) and np.allclose(bottoms, [10.0, 10.0])
+    labels = [t.get_text() for t in right.get_legend().get_texts()]
+    assert "10%-90% of orders" in labels and "25%-75% of orders" in labels
+    title = right.get_title()
+    assert "orders: 4" in title and "quantiles" in title and "25.0% of orders (1 of 4)" in title and "ILDD" in title
+    assert "first 2 of 4" in left.get_title()
+    pixels = save_figure2(runs, tmp_path / "pop.png", dpi=40, floor=0.01, population=population)
+    assert pixels.ndim == 3 and (tmp_path / "pop.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_many_runs_without_a_population_state_their_own_disagreement():
+    """Thirteen orders in detail (more than MAX_CURVES), four of them ending with colour dominant: 4 of 13 disagree
+    with the majority (all unknown, UUUU)."""
+    runs = [[episode(0.5), episode(0.2, color="dominant" if b < 4 else "unknown")] for b in range(13)]
+    assert len(runs) > MAX_CURVES
+    title = figure2(runs).axes[1].get_title()
+    assert "orders: 13" in title and f"{4 / 13:.1%} of orders (4 of 13)" in title and "UUUU" in title

@@ -324,3 +324,42 @@ def test_probe_predictions_in_one_call_equal_one_call_per_probe(world):
         exp.step(lambda name, b, t: outcomes[name])
         one_by_one = torch.stack([exp.predict(probes[p]["measurement"]) for p in probe_names], 1)
         assert torch.equal(exp.probe_predictions(), one_by_one)
+
+
+def test_curves_give_every_orders_error_after_every_episode(world):
+    """All 24 orders of FOUR with curves: each episode's counted errors are Experiment's per-order errors (as the
+    records round them, float rounding aside), and Figure 2's band at an episode is the quantiles of those errors
+    computed directly. The plain trie (every node stepped, no copied subtrees) counts the same."""
+    import numpy as np
+
+    from train.figures import ERROR_BANDS, error_bands
+    from train.quantiles import weighted_quantiles
+
+    _, probe_names, outcomes, probes = world
+    names, n = list(FOUR), len(FOUR)
+    orders = [list(p) for p in itertools.permutations(range(n))]
+    exp = experiment(names, probe_names, orders, outcomes, probes)
+    pop = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=5, threads=1, curves=True)
+    assert "curves" not in run_population(names, probe_names, orders[:2], outcomes, probes, exp.config, threads=1)
+    eps = pop["curves"]["probe_rel_error"]
+    assert len(eps) == n
+    qs = [0.5] + [q for band in ERROR_BANDS for q in band]
+    _, band = error_bands([], {"orders": 24, "curves": pop["curves"]})
+    spread = False
+    for t, e in enumerate(eps):
+        direct = [r[t]["probe_rel_error"] for r in exp.records]
+        have = sorted(x for x in direct if x is not None)
+        assert e["none"] == direct.count(None) and sum(e["counts"]) + e["none"] == 24
+        assert e["values"] == sorted(set(e["values"]))                      # distinct, each counted once
+        assert np.allclose(np.repeat(e["values"], e["counts"]), have, rtol=0, atol=1e-4)
+        if have:
+            want = np.quantile(have, qs)
+            assert np.allclose(weighted_quantiles(e["values"], e["counts"], qs), want, rtol=0, atol=1e-4)
+            assert np.allclose(band[:, t], np.maximum(want, 1e-4), rtol=0, atol=1e-4)
+            spread |= max(e["counts"]) > 1 and len(e["values"]) > 1
+    assert spread     # some episode has several errors, some shared by several orders: the counts matter
+    assert np.allclose(np.repeat(eps[-1]["values"], eps[-1]["counts"]),
+                       sorted(x for x in pop["final_probe_rel_error"] if x is not None), rtol=0, atol=0)
+    plain = run_population(names, probe_names, orders, outcomes, probes, exp.config, chunk=5, threads=1, merge=False,
+                           curves=True)
+    assert plain["curves"] == pop["curves"]

@@ -5,7 +5,10 @@ As the paper plots them: certainty on a 0..1 axis, one colour per property, and 
 letter (dominant and irrelevant both have certainty 1, so the letter is what tells a flip from one to the other).
 The error on a log axis: it falls by orders of magnitude, and a learner can only approach, never pass, the error of
 the best reading of Archimedes its senses allow (the dashed floor, `train.experiment.senses_floor`).
-A population (more than MAX_CURVES orders) is drawn as medians with 10-90 % bands over all its orders.
+More than MAX_CURVES orders are drawn as medians with bands. A population run (`train.population`, every order of
+the set) passes its per-episode errors: the right panel's median and 25-75 % / 10-90 % bands are then over ALL its
+orders, weighted by how many orders share each error, and the share of orders whose final knowledge is not the
+majority's is stated (a few dozen lexicographic orders hid that 43 % of a 9-object set's orders disagreed).
 """
 
 from __future__ import annotations
@@ -20,6 +23,7 @@ from matplotlib.colors import to_rgba  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter  # noqa: E402
 
 from aesop_torch.rules import PROPERTIES, STATES  # noqa: E402
+from train.quantiles import weighted_quantiles  # noqa: E402
 
 MAX_CURVES = 12  # orders drawn one by one; with more, medians and bands over all orders (a person reads ~12 curves)
 STATE_LETTERS = "ULDI"   # per rules.STATES: unknown, likely irrelevant, dominant, irrelevant
@@ -27,6 +31,7 @@ STATE_MARKERS = tuple(rf"$\mathbf{{{ch}}}$" for ch in STATE_LETTERS)   # each po
 PROPERTY_COLOURS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a")   # per rules.PROPERTIES (ColorBrewer Dark2)
 ERROR_CLIP = 1e-4        # errors below (a fraction: 0.01 %), exact zeros included, drawn there on the log axis
 BAND = (0.1, 0.9)        # a population's band: these quantiles over orders
+ERROR_BANDS = (BAND, (0.25, 0.75))   # the error's bands, wide then narrow: the spread and the middle half of orders
 assert len(STATE_LETTERS) == len(STATES) and len(PROPERTY_COLOURS) == len(PROPERTIES)
 
 
@@ -60,6 +65,41 @@ def _median_band(a: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return out[0], out[1], out[2]
 
 
+def error_bands(runs: list[list[dict]], population: dict | None = None) -> tuple[int, np.ndarray]:
+    """(orders counted, (1 + 2 len(ERROR_BANDS), episodes) quantiles of the probe error, a fraction: the median, then
+    each band's low and high). From population["curves"] (every order, weighted by its count) when given, else from
+    the runs, one each. Orders without a prediction yet are left out of an episode; NaN where none has one."""
+    qs = (0.5,) + tuple(q for band in ERROR_BANDS for q in band)
+    if population is not None:
+        eps = population["curves"]["probe_rel_error"]
+        per_episode = [(e["values"], e["counts"]) for e in eps]
+        n = int(population["orders"])
+    else:
+        n = len(runs)
+        per_episode = []
+        for t in range(max((len(r) for r in runs), default=0)):
+            vals = [r[t]["probe_rel_error"] for r in runs if len(r) > t and r[t]["probe_rel_error"] is not None]
+            per_episode.append((vals, [1] * len(vals)))
+    out = np.array([weighted_quantiles(v, c, qs) for v, c in per_episode]).reshape(-1, len(qs)).T
+    return n, np.where(np.isnan(out), np.nan, np.maximum(out, ERROR_CLIP))
+
+
+def disagreement(runs: list[list[dict]], population: dict | None = None) -> tuple[float, int, int, str]:
+    """(share, count, orders, majority key) of the orders whose final knowledge is not the most common one: the
+    population's when given, else the runs' (keys as train.summary's: one letter of STATE_LETTERS per property)."""
+    if population is not None:
+        n = int(population["orders"])
+        share = 1.0 - float(population["agree_fraction"])
+        return share, round(share * n), n, population["most_common_knowledge"]
+    keys = ["".join(STATE_LETTERS[STATES.index(r[-1]["knowledge"][p]["state"])] for p in PROPERTIES)
+            for r in runs if r]
+    if not keys:
+        return 0.0, 0, 0, ""
+    common = max(dict.fromkeys(keys), key=keys.count)   # ties: the first seen, as train.population.agreement
+    other = sum(k != common for k in keys)
+    return other / len(keys), other, len(keys), common
+
+
 def _letters(ax, x: np.ndarray, y: np.ndarray, state: np.ndarray, colour: str, alpha: float) -> None:
     """Each point (x, y) drawn as its state's letter; y and state (orders, episodes) or (episodes,), state -1 drawn
     nowhere. Past 30 episodes only where the state changes (and the first and last), so the letters stay legible."""
@@ -73,20 +113,23 @@ def _letters(ax, x: np.ndarray, y: np.ndarray, state: np.ndarray, colour: str, a
                        linewidths=0, zorder=3, gid=STATE_LETTERS[s])
 
 
-def figure2(runs: list[list[dict]], floor: float | None = None):
+def figure2(runs: list[list[dict]], floor: float | None = None, population: dict | None = None):
     """runs: per order, the episode records of summary.json; floor: the senses' error (a fraction, drawn dashed
-    on the right; None draws none). Returns a matplotlib Figure. Errors are drawn in percent."""
+    on the right; None draws none); population: a population run's {"orders", "agree_fraction",
+    "most_common_knowledge", "curves"} (`run_population(..., curves=True)`), whose bands the right panel draws over
+    every order (the left stays the runs', the orders run in detail). Returns a matplotlib Figure. Errors are drawn
+    in percent."""
     cert, state = knowledge_arrays(runs)
     err = error_array(runs)
     n_orders, _, n_eps = cert.shape
     xs = np.arange(1, n_eps + 1)
-    population = n_orders > MAX_CURVES
+    banded = n_orders > MAX_CURVES
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [3, 2]})
     # a small sideways step per property, so equal certainties (all 0 at first, 1 once decided) stay apart
     dodge = (np.arange(len(PROPERTIES)) - (len(PROPERTIES) - 1) / 2) * min(0.12, 4.0 / max(n_eps, 1))
     for i, colour in enumerate(PROPERTY_COLOURS):
         x = xs + dodge[i]
-        if population:
+        if banded:
             med, lo, hi = _median_band(cert[:, i])
             left.fill_between(xs, lo, hi, facecolor=to_rgba(colour, 0.12), edgecolor=to_rgba(colour, 0.6),
                               linewidth=0.6)
@@ -102,8 +145,10 @@ def figure2(runs: list[list[dict]], floor: float | None = None):
     left.set_ylim(-0.06, 1.08)
     left.set_yticks(np.linspace(0, 1, 6))
     left.set_ylabel("certainty")
-    how = f"median, {BAND[0]:.0%}-{BAND[1]:.0%} band and most orders' state of {n_orders} orders" if population else \
+    how = f"median, {BAND[0]:.0%}-{BAND[1]:.0%} band and most orders' state of {n_orders} orders" if banded else \
         f"{n_orders} order{'s' * (n_orders != 1)}, one line each"
+    if population is not None:
+        how += f": the first {n_orders} of {int(population['orders']):,}, run in detail"
     left.set_title(f"causal knowledge per property after each episode ({how})", fontsize=9)
     handles = []
     for p, colour, s, marker in zip(PROPERTIES, PROPERTY_COLOURS, STATES, STATE_MARKERS):   # a column each
@@ -114,11 +159,19 @@ def figure2(runs: list[list[dict]], floor: float | None = None):
                 frameon=False)
 
     pct = 100 * err
-    if population:
-        med, lo, hi = _median_band(pct)
-        right.fill_between(xs, lo, hi, color="#3182bd", alpha=0.25, linewidth=0,
-                           label=f"{BAND[0]:.0%}-{BAND[1]:.0%} of {n_orders} orders")
-        right.plot(xs, med, color="#08519c", marker=".", linewidth=1.5, label="median")
+    title = "prediction error vs Archimedes (probe objects)"
+    if banded or population is not None:
+        n_err, q = error_bands(runs, population)
+        q = 100 * q
+        ex = np.arange(1, q.shape[1] + 1)
+        for k, (band, alpha) in enumerate(zip(ERROR_BANDS, (0.2, 0.35))):
+            right.fill_between(ex, q[1 + 2 * k], q[2 + 2 * k], color="#3182bd", alpha=alpha, linewidth=0,
+                               label=f"{band[0]:.0%}-{band[1]:.0%} of orders")
+        right.plot(ex, q[0], color="#08519c", marker=".", linewidth=1.5, label="median order")
+        share, other, n_keys, common = disagreement(runs, population)
+        title = (f"prediction error vs Archimedes (probe objects), orders: {n_err:,}"
+                 f"{' (all of the population)' if population is not None else ''}\nbands: quantiles over orders; "
+                 f"final knowledge not the majority's ({common}): {share:.1%} of orders ({other:,} of {n_keys:,})")
     else:
         colours = plt.get_cmap("tab20" if n_orders > 10 else "tab10").colors
         for b in range(n_orders):
@@ -133,7 +186,7 @@ def figure2(runs: list[list[dict]], floor: float | None = None):
     right.yaxis.set_major_formatter(plain)
     lo, hi = right.get_ylim()
     right.yaxis.set_minor_formatter(plain if hi < 10 * lo else NullFormatter())   # within a decade: 2, 3, ... too
-    right.set_title("prediction error vs Archimedes (probe objects)", fontsize=9)
+    right.set_title(title, fontsize=9)
     right.set_ylabel("median |predicted - Archimedes| / Archimedes (%, log)")
     right.legend(fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12), frameon=False)
     for ax in (left, right):
@@ -147,11 +200,12 @@ def figure2(runs: list[list[dict]], floor: float | None = None):
     return fig
 
 
-def save_figure2(runs: list[list[dict]], path, dpi: int = 110, floor: float | None = None) -> np.ndarray:
-    """figure2(runs, floor) drawn once: written to `path` as PNG (the bytes `savefig(path, dpi=dpi)` writes) and
-    returned as pixels, (H, W, 3) uint8, for tensorboard. The runner calls it on a worker while the goal trials
-    play."""
-    fig = figure2(runs, floor=floor)
+def save_figure2(runs: list[list[dict]], path, dpi: int = 110, floor: float | None = None,
+                 population: dict | None = None) -> np.ndarray:
+    """figure2(runs, floor, population) drawn once: written to `path` as PNG (the bytes `savefig(path, dpi=dpi)`
+    writes) and returned as pixels, (H, W, 3) uint8, for tensorboard. The runner calls it on a worker while the goal
+    trials play."""
+    fig = figure2(runs, floor=floor, population=population)
     try:
         fig.set_dpi(dpi)
         fig.canvas.draw()

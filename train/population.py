@@ -199,7 +199,7 @@ class _Trie:
 
 def run_population(train_names: list[str], probe_names: list[str], orders: list[list[int]], outcomes: dict,
                    probes: dict, config: AgentConfig, chunk: int = DEFAULT_CHUNK, progress=None,
-                   threads: int | None = None, merge: bool = True) -> dict:
+                   threads: int | None = None, merge: bool = True, curves: bool = False) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.experiment.draw_orders
@@ -207,13 +207,17 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
     DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
-    and its peer in benches/population.py).
+    and its peer in benches/population.py). curves=True: also the probe error after every episode of every order
+    (one probe reading per stepped state: Figure 2's bands over all orders; off, the run is as fast as before).
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
     the predictions themselves, NaN where nothing was recalled), "most_common_knowledge", "agree_fraction",
     "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level" (trie nodes), "steps_per_level"
-    (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}.
+    (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}; with curves=True also
+    "curves": {"probe_rel_error": per episode, {"values": the distinct errors (rounded as the records), "counts":
+    how many orders have each, "none": how many orders cannot predict yet}} (counts, not N numbers per episode:
+    9! orders share a few thousand values; `train.quantiles.weighted_quantiles` reads them).
     """
     n, N = len(train_names), len(orders)
     if n == 0 or N == 0:
@@ -240,7 +244,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         root = Agent(config, batch=1)
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
-        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge)
+        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge, curves)
         walk.perceive(root)
         A, M = config.hub.max_assemblies, config.memory.max_episodes
         walk.grow(root, (torch.full((1, A), n), torch.full((1, M), n)), None, 0)
@@ -250,7 +254,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     t_end = time.perf_counter()
 
     common, fraction, counts = agreement(keys)
-    return {
+    out = {
         "orders": N,
         "final_knowledge": keys,
         "final_probe_rel_error": errors,
@@ -266,6 +270,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         "timing_s": {"setup": round(t_setup - t0, 3), "steps": round(walk.step_s, 3),
                      "probes": round(walk.probe_s, 3), "total": round(t_end - t0, 3)},
     }
+    if curves:
+        out["curves"] = {"probe_rel_error": walk.curves(errors)}
+    return out
 
 
 def _owned(owner: torch.Tensor, before: torch.Tensor, after: torch.Tensor, obj: torch.Tensor) -> torch.Tensor:
@@ -331,7 +338,8 @@ class _Walk:
     its level, with the same suffixes below it, is not stepped further: its orders take the results of the first.
     Each order ends at a leaf result (knowledge and probe predictions), computed once per distinct final state."""
 
-    def __init__(self, train_names, probe_names, outcomes, probes, orders, chunk, progress, merge=True):
+    def __init__(self, train_names, probe_names, outcomes, probes, orders, chunk, progress, merge=True,
+                 curves=False):
         self.trie, self.chunk, self.progress, self.merge = _Trie(orders), chunk, progress, merge
         self.n, self.N = orders.shape[1], orders.shape[0]
         recs = [outcomes[name] for name in train_names]
@@ -350,6 +358,9 @@ class _Walk:
         self.agent_steps, self.done, self.step_s, self.probe_s = 0, 0, 0.0, 0.0
         self.steps_per_level = [0] * self.n
         self.cache = RecallCache()
+        # curves: level t (before the last), sorted row -> the probe error of its order after episode t + 1
+        self.row_err = torch.full((self.n - 1, self.N), float("nan"), dtype=torch.float64) if curves else None
+        self.err_memo: list[dict] = [{} for _ in range(self.n)]   # level t: state digest -> its probe error
 
     def perceive(self, agent: Agent) -> None:
         """What the agents perceive of each object and probe (Agent.activities), computed once here: in the last bits
@@ -365,6 +376,38 @@ class _Walk:
         pred = torch.cat(self.leaf_pred) if self.leaf_pred else torch.zeros(0, len(self.truth))
         ids = leaf.tolist()
         return [self.leaf_keys[i] for i in ids], [self.leaf_errors[i] for i in ids], pred[leaf]
+
+    def curves(self, final_errors: list) -> list[dict]:
+        """Per episode, the distinct probe errors of the orders with their counts, and the count of orders that
+        cannot predict yet (None); the last episode's from final_errors. Counts do not depend on the rows' order."""
+        final = torch.tensor([float("nan") if e is None else e for e in final_errors], dtype=torch.float64)
+        out = []
+        for err in [*self.row_err, final]:
+            ok = err[~torch.isnan(err)]
+            values, counts = torch.unique(ok, return_counts=True)
+            out.append({"values": values.tolist(), "counts": counts.tolist(), "none": int(len(err) - len(ok))})
+        return out
+
+    def _record_errors(self, agents: Agent, ids: torch.Tensor, t: int, digests: list) -> None:
+        """The probe error of each level-t node just stepped (learning frozen, as Experiment's records), written to
+        every order below it, rounded as the records are. Read once per distinct state (digest) of the level: the
+        probes' recall and readout were half the time of all orders of 8 objects read node by node."""
+        tic = time.perf_counter()
+        memo, new = self.err_memo[t], {}
+        for i, d in enumerate(digests):
+            if d not in memo and d not in new:
+                new[d] = i
+        if new:
+            sub = agents if len(new) == agents.batch else agents.select(torch.tensor(list(new.values())))
+            for d, e in zip(new, median_rel_errors(self._probe_predictions(sub), self.truth)):
+                memo[d] = float("nan") if e is None else round(e, 4)
+        errs = torch.tensor([memo[d] for d in digests], dtype=torch.float64)
+        lo, hi = self.trie.lo[t][ids], self.trie.hi[t][ids]
+        count = hi - lo
+        rows = lo.repeat_interleave(count) + torch.arange(int(count.sum())) - \
+            (count.cumsum(0) - count).repeat_interleave(count)
+        self.row_err[t, rows] = errs.repeat_interleave(count)
+        self.probe_s += time.perf_counter() - tic
 
     def grow(self, parents: Agent, owners: tuple, pnodes: torch.Tensor | None, t: int) -> None:
         """Step the level-t children of `parents` (agent i: the level t-1 node pnodes[i]; the root for t = 0, pnodes
@@ -407,6 +450,8 @@ class _Walk:
             if t + 1 == self.n:
                 self._finish(child, ids, digests)
                 continue
+            if self.row_err is not None:
+                self._record_errors(child, ids, t, digests)
             memo, new, copies, seen = self.memo[t], [], [], {}
             for i, (d, c) in enumerate(zip(digests, ids.tolist())):
                 m = memo.get(d, seen.get(d))
@@ -437,6 +482,8 @@ class _Walk:
         tr = self.trie
         lo, hi, src = int(tr.lo[t][node]), int(tr.hi[t][node]), int(tr.lo[t][like])
         self.leaf_of[lo:hi] = self.leaf_of[src:src + hi - lo]
+        if self.row_err is not None:   # the levels below; level t was recorded when `node` was stepped
+            self.row_err[t + 1:, lo:hi] = self.row_err[t + 1:, src:src + hi - lo]
         self._done(hi - lo)
 
     def _done(self, k: int) -> None:
