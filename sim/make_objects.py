@@ -286,8 +286,8 @@ def main(argv=None) -> int:
     try:
         a = ap.parse_args(argv)
         if not 0 <= a.seed < 2 ** 63 or not 4 <= a.train <= config.max_objects or not 0 <= a.probe <= 1000:
-            raise UsageError(f"--seed must be in 0..2^63-1, --train in 4..{config.max_objects} (the agent's memory "
-                             f"holds {config.max_objects} episodes), --probe in 0..1000")
+            raise UsageError(f"--seed must be in 0..2^63-1, --train in 4..{config.max_objects} (the objects file's limit), "
+                             f"--probe in 0..1000")
         out = None if a.out == "-" else Path(a.out)
         if out is not None and (why := _out_problem(out, a.force)):
             raise UsageError(why)          # before the work, as well as when writing

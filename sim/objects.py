@@ -148,11 +148,11 @@ class ObjectsConfig:
     # keeps it 1.3 cm off the bottom, floating free (shallower, it rests on the bottom and the closed form no longer
     # holds; under 0.24 cm the jar holds less water than the ball displaces and the world cannot be built).
     min_water_depth_cm: float = 2.0
-    # objects the agent can meet in one life: train (one episode each) plus pool (dropped in goal trials). The
-    # memory holds 230 episodes and the hub 230 objects (aesop_torch/memory.py MemoryConfig.max_episodes,
-    # aesop_torch/hub.py HubConfig.max_assemblies; tests/test_objects_limits.py checks they agree); beyond that the
-    # run would stop mid-way, "object hub full".
-    max_objects: int = 230
+    # objects one life can meet: train (one episode each) plus pool (dropped in goal trials). Not the memory's 230
+    # episodes: a memory or hub that forgets when full (MemoryConfig / HubConfig.when_full) runs any length, and the
+    # runner refuses up front only a `refuse` one that is too small (train/run.py check_capacity); 2000 bounds a
+    # file to what one life can simulate (about a second per drop with physics, ~35 min).
+    max_objects: int = 2000
 
     @property
     def max_jar_height_cm(self) -> float:
@@ -403,7 +403,7 @@ def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     met = len(data["train"]) + len(data.get("pool", []))
     if met > config.max_objects:
         raise ObjectsFileError(f"'train' and 'pool' hold {met} objects, more than the agent can learn in one life "
-                               f"(at most {config.max_objects}: its memory holds {config.max_objects} episodes)")
+                               f"(at most {config.max_objects})")
     groups = {group: [_parse_object(item, f"{group}[{i}]", jar, config) for i, item in enumerate(data.get(group, []))]
               for group in ("train", "probe", "pool")}
     seen = set()

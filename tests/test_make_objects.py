@@ -71,7 +71,7 @@ def cli(*args, cwd=ROOT):
     ([], "required: --seed"),
     (["--seed", "1", "--bogus"], "unrecognized arguments"),
     (["--seed", "1", "--jar", "huge"], "invalid choice"),
-    (["--seed", "1", "--train", "231"], "4..230"),              # more than the agent's memory holds
+    (["--seed", "1", "--train", "2001"], "4..2000"),            # more than an objects file holds
 ])
 def test_cli_flag_errors_are_one_line_with_exit_2(args, words):
     code, out, err = cli(*args)

@@ -1,6 +1,6 @@
-"""The objects file's limits that come from elsewhere agree with where they come from (the agent's memory, the
-hand's least felt mass), a file beyond them is refused up front, and refusing any file takes seconds, not minutes
-(the nesting check is linear in the file's size)."""
+"""The objects file's limits that come from elsewhere agree with where they come from (the hand's least felt mass),
+a file beyond them is refused up front, a run its memory or hub cannot hold (when_full = refuse) is refused up front
+by the runner, and refusing any file takes seconds, not minutes (the nesting check is linear in the file's size)."""
 
 import json
 import subprocess
@@ -23,8 +23,9 @@ def cube(i: int) -> dict:
     return {"name": f"o{i}", "shape": "cube", "color": "red", "dims_cm": [2.0], "mass_g": 5}
 
 
-def test_the_object_limit_is_what_the_agents_memory_and_hub_hold():
-    assert CFG.max_objects == MemoryConfig().max_episodes == HubConfig().max_assemblies == 230
+def test_the_object_limit_is_no_longer_the_memorys_a_forgetting_memory_runs_past_it():
+    # the file allows lives longer than the default memory and hub; the runner refuses what a `refuse` one can't hold
+    assert CFG.max_objects == 2000 > MemoryConfig().max_episodes == HubConfig().max_assemblies == 230
 
 
 def test_the_lightest_object_is_the_least_the_hand_reports():
@@ -32,31 +33,51 @@ def test_the_lightest_object_is_the_least_the_hand_reports():
     assert CFG.min_mass_g == SensorModel().min_felt_mass_g == WorldConfig().min_felt_mass_g
 
 
-@pytest.mark.parametrize("n_train, n_pool", [(231, 0), (200, 31), (1, 230), (1000, 0)])
-def test_more_objects_than_the_memory_holds_are_refused_up_front(n_train, n_pool):
+@pytest.mark.parametrize("n_train, n_pool", [(2001, 0), (1800, 201), (1, 2000)])
+def test_more_objects_than_the_file_allows_are_refused_up_front(n_train, n_pool):
     data = {"train": [cube(i) for i in range(n_train)], "pool": [cube(n_train + i) for i in range(n_pool)]}
     with pytest.raises(ObjectsFileError) as e:
         parse_objects(data)
     msg = str(e.value)
-    assert f"{n_train + n_pool} objects" in msg and "230" in msg and "memory" in msg and "\n" not in msg
+    assert f"{n_train + n_pool} objects" in msg and "2000" in msg and "\n" not in msg
 
 
-def test_as_many_objects_as_the_memory_holds_are_admitted():
-    assert len(parse_objects({"train": [cube(i) for i in range(230)]}).train) == 230
-    s = parse_objects({"train": [cube(i) for i in range(200)], "pool": [cube(200 + i) for i in range(30)],
-                       "probe": [cube(230 + i) for i in range(40)]})     # probes are only predicted: not counted
-    assert len(s.train) + len(s.pool) == 230 and len(s.probe) == 40
+def test_as_many_objects_as_the_file_allows_are_admitted():
+    assert len(parse_objects({"train": [cube(i) for i in range(2000)]}).train) == 2000
+    s = parse_objects({"train": [cube(i) for i in range(1800)], "pool": [cube(1800 + i) for i in range(200)],
+                       "probe": [cube(2000 + i) for i in range(40)]})     # probes are only predicted: not counted
+    assert len(s.train) + len(s.pool) == 2000 and len(s.probe) == 40
 
 
-def test_the_runner_refuses_231_objects_before_running_anything(tmp_path):
+@pytest.mark.parametrize("sets, words", [
+    ([], "memory.max_episodes = 230 and memory.when_full = refuse"),            # the default memory refuses
+    (["memory.when_full=forget_oldest"], "hub.max_assemblies = 230 and hub.when_full = refuse"),
+    (["memory.when_full=forget_weakest", "hub.max_assemblies=100", "hub.when_full=refuse"], "hub.max_assemblies = 100"),
+])
+def test_the_runner_refuses_a_life_its_memory_or_hub_cannot_hold_before_writing_anything(tmp_path, sets, words):
     f = tmp_path / "many.json"
     f.write_text(json.dumps({"train": [cube(i) for i in range(231)]}))
-    t0 = time.perf_counter()
     r = subprocess.run([sys.executable, str(ROOT / "train" / "run.py"), "--objects", str(f), "--orders", "1",
-                        "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120)
+                        "--out", str(tmp_path / "o"), *[a for s in sets for a in ("--set", s)]],
+                       capture_output=True, text=True, timeout=180)
     lines = r.stderr.strip().splitlines()
-    assert r.returncode == 2 and len(lines) == 1 and "231 objects" in lines[0], r.stderr
-    assert not (tmp_path / "o").exists() and time.perf_counter() - t0 < 60
+    assert r.returncode == 2 and len(lines) == 1 and "231 train objects" in lines[0] and words in lines[0], r.stderr
+    part = words.split(".")[0]
+    assert f"--set {part}.when_full=forget_oldest" in lines[0], lines[0]
+    assert not (tmp_path / "o").exists()
+
+
+def test_check_capacity_counts_train_objects_against_a_refusing_memory_and_hub():
+    from aesop_torch.agent import AgentConfig
+    from train.run import check_capacity
+    cfg = AgentConfig()
+    assert check_capacity(cfg, 230) is None and "memory.max_episodes = 230" in check_capacity(cfg, 231)
+    cfg.memory.when_full = "forget_oldest"
+    assert "hub.max_assemblies = 230" in check_capacity(cfg, 231)
+    cfg.hub.when_full = "forget_weakest"
+    assert check_capacity(cfg, 2000) is None
+    cfg.memory.when_full, cfg.memory.max_episodes = "refuse", 4
+    assert check_capacity(cfg, 4) is None and "would stop at episode 5" in check_capacity(cfg, 5)
 
 
 # Files of at most MAX_FILE_BYTES that made the old nesting scan ('"(?:[^"\\]|\\.)*"' removed by re.sub) retry

@@ -240,6 +240,58 @@ def test_a_bad_override_is_refused_in_one_line(tmp_path, capsys, override, words
     assert not (tmp_path / "out").exists()
 
 
+SMALL_MEMORY = """
+[[conditions]]
+name = "small"
+model = "paper"
+overrides = { "memory.max_episodes" = 4, "hub.max_assemblies" = 4, "memory.when_full" = "POLICY", "hub.when_full" = "POLICY" }
+
+[[sets]]
+name = "eights"
+generate = { seeds = [3, 4], train = 8, probe = 2, pairs = true }
+orders = 2
+"""
+
+
+@pytest.mark.parametrize("policy", ["forget_oldest", "forget_weakest"])
+def test_eight_objects_through_a_memory_and_hub_of_four_run_to_the_end(tmp_path, policy):
+    pytest.importorskip("train.config")
+    _, (cell,) = sweep.load_sweep(_write(tmp_path, SMALL_MEMORY.replace("POLICY", policy)))
+    cfg = sweep.agent_config(cell["spec"]["condition"], 3, 8)
+    assert (cfg.memory.max_episodes, cfg.hub.max_assemblies, cfg.memory.when_full) == (4, 4, policy)
+    rows = sweep.run_cell(cell["spec"], cell["objects"]).to_pylist()
+    assert [(r["order"], r["episode"]) for r in rows] == [(o, e) for o in range(2) for e in range(1, 9)]
+    assert all(r["probe_rel_error"] is not None for r in rows)   # predicted to the end, past the fifth object
+
+
+@pytest.mark.parametrize("part", ["memory", "hub"])
+def test_a_refusing_memory_or_hub_too_small_for_the_set_is_refused_before_anything_is_written(tmp_path, capsys, part):
+    pytest.importorskip("train.config")
+    other = {"memory": "hub", "hub": "memory"}[part]
+    text = SMALL_MEMORY.replace(f'"{part}.when_full" = "POLICY"', f'"{part}.when_full" = "refuse"')
+    path = _write(tmp_path, text.replace("POLICY", "forget_oldest"))
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    size = {"memory": "max_episodes", "hub": "max_assemblies"}[part]
+    assert len(lines) == 1 and "conditions[0] 'small': 8 train objects but " in lines[0], lines
+    assert f"{part}.{size} = 4 and {part}.when_full = refuse" in lines[0] and other + "." not in lines[0], lines
+    assert f'overrides {{ "{part}.when_full" = "forget_oldest" }}' in lines[0], lines
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_runner_refuses_eight_objects_through_a_refusing_memory_of_four_in_one_line(tmp_path):
+    from sim.make_objects import generate
+    f = tmp_path / "eight.json"
+    f.write_text(json.dumps(generate(3, 8, 2, pairs=True)))
+    r = subprocess.run([sys.executable, "train/run.py", "--objects", str(f), "--orders", "1", "--out",
+                        str(tmp_path / "o"), "--set", "memory.max_episodes=4"], cwd=ROOT, capture_output=True,
+                       text=True, timeout=180)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1, r.stderr
+    assert "8 train objects but memory.max_episodes = 4 and memory.when_full = refuse" in lines[0], lines
+    assert "--set memory.when_full=forget_oldest" in lines[0] and not (tmp_path / "o").exists()
+
+
 def test_cells_are_named_by_a_stable_hash_of_their_spec(tmp_path):
     _, cells = sweep.load_sweep(_write(tmp_path, TINY))
     assert len({c["id"] for c in cells}) == 4

@@ -204,6 +204,22 @@ def resolve_config(args, objects):
     return config
 
 
+def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}={value}") -> str | None:
+    """Why a run of n_train episodes cannot end with this AgentConfig, in one line, or None. A memory or hub whose
+    when_full is `refuse` stops the run at its first episode past capacity, maybe hours in: refused before anything
+    is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
+    a copy with room for theirs (train/trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
+    differs)."""
+    for part, size_key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
+        c = getattr(agent, part)
+        size = getattr(c, size_key)
+        if c.when_full == "refuse" and n_train > size:
+            return (f"{n_train} train objects but {part}.{size_key} = {size} and {part}.when_full = refuse: the run "
+                    f"would stop at episode {size + 1}; {setting(part + '.when_full', 'forget_oldest')} (or "
+                    f"forget_weakest) or {setting(part + '.' + size_key, n_train)}")
+    return None
+
+
 def _origin(origins: dict, key: str | None) -> str:
     """"--set k=v: " for the key's last setting (or the last one under a table it names), else ""."""
     if key is None:
@@ -464,6 +480,8 @@ def main(argv=None) -> int:
             from train.physics import Physics
             _OPEN["drawer"] = Drawer()   # before torch's import: it imports the figure's modules on the idle core
             args.run_config = resolve_config(args, objects)   # imports torch and the simulator, checks every key
+            if why := check_capacity(args.run_config.agent, len(objects.train)):
+                raise UsageError(why)
             physics = _OPEN["physics"] = Physics(objects, seed=args.seed, gui=args.gui,
                                                  **world_kw(args))   # forked in prepare
             exp, resumed, lock = prepare(args, objects, n_orders, physics)
@@ -663,10 +681,6 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
             if not per_episode:
                 bar.update(1, recs[0]["object"])
-    # Figure 2 shows the exploration: drawn and written by the drawer while the population and the goal trials run
-    drawer = _OPEN["drawer"] = _OPEN["drawer"] or Drawer()   # main() started it
-    figure = drawer.draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110,
-                         senses_floor(exp.probes))
     population = None
     orders = draw_orders(len(exp.train_names), args.orders, args.seed)
     if len(orders) > len(exp.orders):
@@ -675,7 +689,13 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
               flush=True)
         with Step("population", len(orders), "order") as bar:
             population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
-                                        exp.config, progress=bar.to)
+                                        exp.config, progress=bar.to, curves=True)
+    # Figure 2 shows the exploration (a population's error bands over all its orders): drawn and written by the
+    # drawer while the goal trials run
+    drawer = _OPEN["drawer"] = _OPEN["drawer"] or Drawer()   # main() started it
+    figure = drawer.draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110, senses_floor(exp.probes),
+                         population and {k: population[k] for k in ("orders", "agree_fraction",
+                                                                    "most_common_knowledge", "curves")})
     if objects.trials:
         from train.trials import play_trials
         print(f"goal trials: {len(objects.trials)} trial(s) with each of {len(exp.orders)} order(s)' agents, the jar "

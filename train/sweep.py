@@ -41,7 +41,7 @@ ROOT = Path(__file__).resolve().parents[1]
 PROG = "train/sweep.py"
 FORMAT = 1               # in every cell's hash: bumped when the rows a spec gives change
 WORLDS = ("closed_form", "closed_form_exact", "physics")
-from train.run import ABLATIONS, MODELS  # noqa: E402   the runner's copy of the agent's tables, without torch
+from train.run import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables and rules, without torch
 MAX_CELLS = 1_000_000
 MAX_SEEDS = 1_000_000    # seeds of one range
 MAX_ORDERS = 100_000     # orders of one cell (one batched agent)
@@ -324,6 +324,12 @@ def _resolve(doc: dict, base: Path) -> tuple[dict, list[dict]]:
     n = len(conditions) * sum(len(f["seeds"]) for _, found in sets for f in found)
     if n > MAX_CELLS:
         raise SweepError(f"{n:,} cells, more than {MAX_CELLS:,}")
+    for i, cond in enumerate(conditions):   # the buffers fit the set unless an override sized them otherwise
+        for n_train in sorted({f["n_train"] for _, found in sets for f in found}) if cond["overrides"] else ():
+            why = check_capacity(agent_config(cond, 0, n_train), n_train,
+                                 setting=lambda key, value: f"overrides {{ {json.dumps(key)} = {json.dumps(value)} }}")
+            if why:
+                raise SweepError(f"conditions[{i}] {cond['name']!r}: {why}")
     spec = {"format": FORMAT, "world": world, "conditions": conditions, "sets": [s for s, _ in sets]}
     cells = []
     for cond in conditions:
