@@ -148,8 +148,10 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
     how = f"median, {BAND[0]:.0%}-{BAND[1]:.0%} band and most orders' state of {n_orders} orders" if banded else \
         f"{n_orders} order{'s' * (n_orders != 1)}, one line each"
     if population is not None:
-        how += f": the first {n_orders} of {int(population['orders']):,}, run in detail"
-    left.set_title(f"causal knowledge per property after each episode ({how})", fontsize=9)
+        first = f"the first {n_orders} of {int(population['orders']):,} orders, run in detail"
+        how = how.replace(f"of {n_orders} orders", f"of {first}") if banded else f"{first}, one line each"
+    left.set_title(f"causal knowledge per property after each episode{chr(10) if population else ' '}({how})",
+                   fontsize=9)
     handles = []
     for p, colour, s, marker in zip(PROPERTIES, PROPERTY_COLOURS, STATES, STATE_MARKERS):   # a column each
         handles.append(Line2D([], [], color=colour, linewidth=2, label=p))
@@ -167,10 +169,10 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
         for k, (band, alpha) in enumerate(zip(ERROR_BANDS, (0.2, 0.35))):
             right.fill_between(ex, q[1 + 2 * k], q[2 + 2 * k], color="#3182bd", alpha=alpha, linewidth=0,
                                label=f"{band[0]:.0%}-{band[1]:.0%} of orders")
-        right.plot(ex, q[0], color="#08519c", marker=".", linewidth=1.5, label="median order")
+        right.plot(ex, q[0], color="#08519c", marker=".", linewidth=1.5, label="median of orders")
         share, other, n_keys, common = disagreement(runs, population)
-        title = (f"prediction error vs Archimedes (probe objects), orders: {n_err:,}"
-                 f"{' (all of the population)' if population is not None else ''}\nbands: quantiles over orders; "
+        title = (f"prediction error vs Archimedes (probe objects)\norders: {n_err:,}"
+                 f"{' (all of the population)' if population is not None else ''}; bands: quantiles over orders\n"
                  f"final knowledge not the majority's ({common}): {share:.1%} of orders ({other:,} of {n_keys:,})")
     else:
         colours = plt.get_cmap("tab20" if n_orders > 10 else "tab10").colors
