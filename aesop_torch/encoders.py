@@ -59,6 +59,10 @@ class EncoderConfig:
     # developmental shapes: a cylinder's height / diameter is log-uniform in [1/max_aspect, max_aspect] and a box's
     # two shorter sides over its longest in [1/max_aspect, 1]: from a disc or slab to a rod, up to a factor 4.
     max_aspect: float = 4.0
+    # extra context properties perceived with the object (e.g. an apparatus' tube width or water level), each a 1-d
+    # value in 0..1 given as measurement["context"][name], each on a SOM map of its own; none by default, so the
+    # default agent has exactly the paper's four property maps and the word map
+    context: tuple = ()
 
 
 def _log_unit(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:
@@ -154,6 +158,17 @@ class SensoryEncoder(nn.Module):
             if (mass <= 0).any():
                 raise ValueError("measurement 'mass_g' must be > 0")
             out["weight"] = _log_unit(mass[:, None], c.mass_min_g, c.mass_max_g)
+        if "context" in measurement:
+            ctx = measurement["context"]
+            unknown = sorted(set(ctx) - set(c.context)) if isinstance(ctx, dict) else None
+            if unknown is None or unknown:
+                raise ValueError(f"measurement 'context' must be a dict over EncoderConfig.context "
+                                 f"{tuple(c.context)}, got {unknown if unknown else type(ctx).__name__}")
+            for name, v in ctx.items():
+                t = _batched(v, name, ())
+                if (t < 0).any() or (t > 1).any():
+                    raise ValueError(f"context '{name}' must be in 0..1")
+                out[name] = t[:, None]
         if "words" in measurement:
             w = measurement["words"]
             out[WORD_MAP] = encode_words([w] if isinstance(w, str) else w)
@@ -190,10 +205,12 @@ def developmental_samples(n: int, generator: torch.Generator, config: EncoderCon
     mass = _log_uniform(g, c.mass_min_g, c.mass_max_g, (n,))
     out = encoder({"rgb": rgb, "extent_cm": props * size, "fill": fill, "mass_g": mass})
     out[WORD_MAP] = torch.eye(len(VOCABULARY))[torch.randint(len(VOCABULARY), (n,), generator=g)]
+    for name in c.context:   # drawn last: without context the draws above, and so the maps, are unchanged
+        out[name] = torch.rand(n, 1, generator=g)
     return out
 
 
-def default_map_configs() -> dict[str, SOMConfig]:
+def default_map_configs(config: EncoderConfig | None = None) -> dict[str, SOMConfig]:
     """One SOM per map, sized to resolve what the experiment must tell apart.
 
     activity_sigma is about the spacing between neighbouring codebook vectors (in input units, measured on the
@@ -212,8 +229,11 @@ def default_map_configs() -> dict[str, SOMConfig]:
     - word 8x8 over the 22 words (one-hot): every word gets units of its own (22 distinct winners in seeds 0-5),
       ~3 each; two words are 1.41 apart, so sigma 0.4 gives a word ~0.002 on another's units (the ordering
       phase is what separates them). Phrases are read word by word (`word_activity`).
+    - each context property of config.context: 1x20 over 0..1, like size (a unit per 1/20, sigma the spacing).
     1-d data get 1-d maps (a line cannot fold). The radius starts at about a quarter of the map's longest side.
     """
+    context = {name: SOMConfig(rows=1, cols=20, dim=1, sigma=5.0, sigma_end=0.5, activity_sigma=0.05)
+               for name in (config.context if config is not None else ())}
     return {
         "color": SOMConfig(rows=10, cols=10, dim=3, sigma=2.5, sigma_end=0.5, activity_sigma=0.2),
         "shape": SOMConfig(rows=8, cols=8, dim=3, sigma=2.0, sigma_end=0.5, activity_sigma=0.1),
@@ -221,6 +241,7 @@ def default_map_configs() -> dict[str, SOMConfig]:
         "weight": SOMConfig(rows=1, cols=30, dim=1, sigma=7.5, sigma_end=0.5, activity_sigma=0.033),
         WORD_MAP: SOMConfig(rows=8, cols=8, dim=len(VOCABULARY), sigma=1.5, sigma_end=0.3, activity_sigma=0.4,
                             ordering_iterations=4000),
+        **context,
     }
 
 
@@ -233,7 +254,7 @@ def train_property_maps(n_samples: int, generator: torch.Generator, epochs: int 
     """
     samples = developmental_samples(n_samples, generator, config)
     maps = nn.ModuleDict()
-    for name, cfg in default_map_configs().items():
+    for name, cfg in default_map_configs(config).items():
         som = SelfOrganizingMap(cfg)
         som.fit(samples[name], epochs, generator)
         maps[name] = som

@@ -1,0 +1,83 @@
+"""The battery's scoring (exact binomial test), its agent side (context maps, a hand-made 2-option task) and the
+context option's default (off: the default agent's maps and output unchanged)."""
+
+import math
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import pytest
+import torch
+
+from aesop_torch.encoders import (MAP_NAMES, EncoderConfig, SensoryEncoder, default_map_configs,
+                                  developmental_samples)
+from train.battery import CONTEXT, binomial_tail, context_agent, make_config, play, score
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_binomial_tail_known_values():
+    # by hand: sum_{i>=15} C(20, i) / 2^20 = (15504 + 4845 + 1140 + 190 + 20 + 1) / 1048576
+    assert binomial_tail(15, 20, 0.5) == pytest.approx(21700 / 2 ** 20, abs=1e-12)
+    assert binomial_tail(15, 20, 0.5) == pytest.approx(0.020694, abs=1e-6)
+    assert binomial_tail(14, 20, 0.5) == pytest.approx(0.057659, abs=1e-6)
+    assert binomial_tail(0, 20, 0.5) == pytest.approx(1.0)
+    assert binomial_tail(1, 1, 1 / 3) == pytest.approx(1 / 3)
+    assert binomial_tail(2, 2, 1 / 3) == pytest.approx(1 / 9)
+    with pytest.raises(ValueError):
+        binomial_tail(21, 20, 0.5)
+
+
+def test_score_pools_subjects_per_window():
+    right = [[True] * 20, [False] + [True] * 14 + [False] * 5]
+    s = score(right, 0.5)
+    assert (s["trial 1"].correct, s["trial 1"].n) == (1, 2)
+    assert (s["1-5"].correct, s["1-5"].n) == (9, 10)
+    assert (s["1-20"].correct, s["1-20"].n) == (34, 40)
+    one = score([[True] * 15 + [False] * 5], 0.5)["1-20"]
+    assert one.passed and not score([[True] * 14 + [False] * 6], 0.5)["1-20"].passed
+
+
+def test_context_off_by_default():
+    assert EncoderConfig().context == ()
+    assert tuple(default_map_configs()) == MAP_NAMES
+    assert tuple(default_map_configs(EncoderConfig())) == MAP_NAMES
+    g0, g1 = torch.Generator().manual_seed(3), torch.Generator().manual_seed(3)
+    plain = developmental_samples(50, g0)
+    ctx = developmental_samples(50, g1, EncoderConfig(context=("width",)))
+    assert set(plain) == set(MAP_NAMES) and set(ctx) == set(MAP_NAMES) | {"width"}
+    for name in MAP_NAMES:   # the context's draws come last: the maps' own samples are unchanged
+        assert torch.equal(plain[name], ctx[name])
+    m = {"rgb": [0.5, 0.5, 0.5], "context": {"width": 0.3}}
+    with pytest.raises(ValueError, match="context"):
+        SensoryEncoder()(m)                       # a default encoder perceives no context
+    out = SensoryEncoder(EncoderConfig(context=("width",)))(m)
+    assert out["width"].tolist() == [[pytest.approx(0.3)]]
+    with pytest.raises(ValueError, match="0..1"):
+        SensoryEncoder(EncoderConfig(context=("width",)))({"context": {"width": 1.5}})
+
+
+def _small(model):
+    c = make_config(model, seed=1)
+    return replace(c, som_samples=800, som_epochs=5)
+
+
+@pytest.mark.parametrize("model", ["paper", "extended"])
+def test_two_options_one_episode_each_chooses_the_better(model):
+    """Same object, two tubes differing only in their contents' look: option 0 raises the reward 2 cm (in reach),
+    option 1 not at all. Each agent stores one episode per option (in either order); the oracle: option 0."""
+    obj = {"rgb": [0.8, 0.1, 0.1], "extent_cm": [4.0, 4.0, 4.0], "fill": 1.0, "mass_g": 150.0}
+    ctx = lambda s, place: {"surface": s, "width": 0.3, "level": 0.5, "place": place}
+    options = [dict(obj, context=ctx(0.15, 0.0)), dict(obj, context=ctx(0.6, 1.0))]
+    world = lambda i: (2.0, True) if i == 0 else (0.0, False)
+    agent = context_agent(_small(model), 2)
+    assert tuple(agent.maps)[-len(CONTEXT):] == CONTEXT
+    right, chosen = play(agent, options, world, {0}, [[0, 1], [1, 0]], trials=3, seed=1)
+    assert chosen == [[0, 0, 0], [0, 0, 0]] and right == [[True] * 3] * 2
+
+
+def test_bench_help():
+    r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--help"], capture_output=True,
+                       text=True, timeout=120)
+    assert r.returncode == 0 and "--ablate" in r.stdout and "--record" in r.stdout
