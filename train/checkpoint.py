@@ -132,7 +132,8 @@ def load(path: str | os.PathLike) -> dict:
     if size > MAX_BYTES:
         raise CheckpointError(f"{path} is {size:,} bytes, larger than any checkpoint ({MAX_BYTES:,})")
     try:
-        raw = torch.load(path, map_location="cpu", weights_only=True)
+        # mmap: the pickle (the tensors' headers) is read, their bytes stay on disk until something touches them
+        raw = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     except Exception as e:  # noqa: BLE001  a damaged or foreign file can fail in many ways; each is one line
         raise CheckpointError(f"{path} is not a readable checkpoint (damaged or foreign: {type(e).__name__})"
                               ) from None
@@ -147,6 +148,8 @@ def load(path: str | os.PathLike) -> dict:
     if extra or not {"run", "experiment"} <= set(raw):
         raise CheckpointError(f"{path}: unexpected top-level keys {sorted(map(str, set(raw)))}")
     state = {"run": raw["run"], "experiment": raw["experiment"]}
+    if problem := tensor_problem(state, size):   # before the checksum: digest() copies every tensor it reads
+        raise CheckpointError(f"{path}: wrong structure: {problem}")
     try:
         ok = raw.get("sha256") == digest(state)
     except (TypeError, RecursionError):
@@ -157,7 +160,10 @@ def load(path: str | os.PathLike) -> dict:
     problem = structure_problem(state)
     if problem:
         raise CheckpointError(f"{path}: wrong structure: {problem}")
-    return state
+    from train.experiment import state_problem   # here: train.experiment imports this module
+    if problem := state_problem(state["experiment"], state["run"]):
+        raise CheckpointError(f"{path}: out of range: {problem}")
+    return _in_memory(state)
 
 
 def _from_before_models(state: dict) -> None:
@@ -175,12 +181,12 @@ def upgrade(path: str | os.PathLike) -> None:
     the structure check. Its content cannot be verified: use it on files you trust (e.g. a shipped default)."""
     import torch
 
-    raw = torch.load(path, map_location="cpu", weights_only=True)
+    raw = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     if not isinstance(raw, dict) or set(raw) != {"run", "experiment"}:
         raise CheckpointError(f"{path} is not a checkpoint of the older version")
-    if problem := structure_problem(raw):
+    if problem := tensor_problem(raw, Path(path).stat().st_size) or structure_problem(raw):
         raise CheckpointError(f"{path}: wrong structure: {problem}")
-    save_atomic(raw, path)
+    save_atomic(_in_memory(raw), path)
 
 
 def _typed(d: dict, spec: dict, where: str) -> str | None:
@@ -191,6 +197,61 @@ def _typed(d: dict, spec: dict, where: str) -> str | None:
         if not isinstance(d[k], kind) or (kind is int and isinstance(d[k], bool)):
             return f"{where}[{k!r}] is a {type(d[k]).__name__}, not a {kind.__name__}"
     return None
+
+
+# what an agent's state is made of (aesop_torch: float32 values, int64 counts, bool patterns); anything else
+# (complex, quantized, float64 ...) is no tensor this code wrote
+TENSOR_DTYPES = ("float32", "int64", "bool")
+
+
+def tensor_problem(state, budget: int) -> str | None:
+    """What is wrong with the tensors anywhere in `state`, read from their headers only (nothing touches their
+    bytes): each must be dense (strided, no sparse layout, no conjugate or negative bit), of a TENSOR_DTYPES dtype,
+    with non-negative strides and offset, and hold its elements in its own stored bytes (an expanded tensor, a
+    stride of 0 over a storage too small for its shape, would ask digest() for its full size); together their
+    elements are at most `budget` bytes (the file's size: the bytes are in the file). None when all is well."""
+    import torch
+
+    total, stack = 0, [state]
+    while stack:
+        x = stack.pop()
+        if isinstance(x, dict):
+            stack.extend(x.keys())
+            stack.extend(x.values())
+        elif isinstance(x, (list, tuple)):
+            stack.extend(x)
+        elif isinstance(x, torch.Tensor):
+            if x.layout != torch.strided or x.is_sparse or x.is_quantized or x.is_nested:
+                return f"a {x.layout} tensor (only dense tensors are stored)"
+            if str(x.dtype).removeprefix("torch.") not in TENSOR_DTYPES:
+                return f"a tensor of {x.dtype} (stored: {', '.join(TENSOR_DTYPES)})"
+            if x.is_conj() or x.is_neg() or x.device.type != "cpu":
+                return "a tensor with a conjugate or negative view, or off the cpu"
+            size, n = x.element_size(), x.numel()
+            if any(s < 0 for s in x.stride()) or x.storage_offset() < 0:
+                return f"a tensor of shape {tuple(x.shape)} with a negative stride or offset"
+            span = 1 + sum((d - 1) * s for d, s in zip(x.shape, x.stride())) if n else 0
+            stored = x.untyped_storage().nbytes()
+            if n * size > stored or (x.storage_offset() + span) * size > stored:
+                return (f"a tensor of shape {tuple(x.shape)} (strides {tuple(x.stride())}) over {stored:,} stored "
+                        f"bytes: its elements are not all stored")
+            total += n * size
+            if total > budget:
+                return f"tensors of more than {budget:,} bytes in a file of {budget:,}"
+    return None
+
+
+def _in_memory(state):
+    """state with every tensor copied off the file's memory map (each already checked by tensor_problem)."""
+    import torch
+
+    if isinstance(state, dict):
+        return {k: _in_memory(v) for k, v in state.items()}
+    if isinstance(state, list):
+        return [_in_memory(v) for v in state]
+    if isinstance(state, tuple):
+        return tuple(_in_memory(v) for v in state)
+    return state.clone() if isinstance(state, torch.Tensor) else state
 
 
 def _finite(x) -> bool:
@@ -257,14 +318,23 @@ def _agent_problem(e: dict) -> str | None:
     import torch
 
     from aesop_torch.agent import Agent, AgentConfig
+    from train.config import ConfigError, apply_overrides
+    try:
+        # the config's own validation (types, ranges, each dataclass's __post_init__), as for --config and --set
+        config = apply_overrides(AgentConfig.named(e["config"].get("model")), e["config"])
+    except ConfigError as err:
+        return f"config: {err}"
+    except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
+        return f"config is not an agent's config ({type(err).__name__})"
     try:
         # the agents as train.experiment.Experiment builds them (its __post_init__: seed, buffers sized to the train
-        # objects), without importing it (it imports this module)
-        config = AgentConfig.from_dict(e["config"])
+        # objects), without importing it (it imports this module); on the meta device: shapes and dtypes only, so
+        # a config asking for huge buffers costs nothing
         config.seed = e["seed"]
         config.memory.max_episodes = min(config.memory.max_episodes, len(e["train_names"]))
         config.hub.max_assemblies = min(config.hub.max_assemblies, len(e["train_names"]))
-        like = Agent(config, batch=len(e["orders"]), develop=False).state_dict()
+        with torch.device("meta"):
+            like = Agent(config, batch=len(e["orders"]), develop=False).state_dict()
     except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
         return f"config does not build an agent ({type(err).__name__})"
     got = e["agent"]
