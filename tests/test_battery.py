@@ -81,3 +81,8 @@ def test_bench_help():
     r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--help"], capture_output=True,
                        text=True, timeout=120)
     assert r.returncode == 0 and "--ablate" in r.stdout and "--record" in r.stdout
+
+
+def test_score_of_fewer_trials_counts_what_was_played():
+    s = score([[True] * 10, [False] * 10], 0.5)["1-20"]
+    assert (s.correct, s.n) == (10, 20)

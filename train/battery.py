@@ -63,8 +63,7 @@ def score(correct: list[list[bool]], chance: float) -> dict:
     pool a subject's trials; here every agent is a subject)."""
     out = {}
     for label, upto in (("trial 1", 1), ("1-5", 5), ("1-20", TRIALS)):
-        ks = [sum(c[:upto]) for c in correct]
-        out[label] = Score(sum(ks), upto * len(correct), chance)
+        out[label] = Score(sum(sum(c[:upto]) for c in correct), sum(len(c[:upto]) for c in correct), chance)
     return out
 
 
@@ -156,31 +155,37 @@ def perceived(task, tube, obj) -> dict:
     return m
 
 
-def task_world(task):
+def task_world(task, outcome=None):
     """(options, world(i), correct) of a task: every option from the task's starting levels (each trial is set up
     afresh, as in the studies), correct = the options that bring the reward in reach (else those that raise it most)."""
-    from sim.apparatus import outcome
+    if outcome is None:
+        from sim.apparatus import outcome
     opts = list(task.options())
     levels = {t.name: t.level_cm for t in task.tubes}
     outs = [outcome(task, dict(levels), tube, obj) for tube, obj in opts]
     rises = [float(o["reward_rise_cm"]) for o in outs]
     reached = [bool(o["reached"]) for o in outs]
-    correct = {i for i, r in enumerate(reached) if r} or {i for i, r in enumerate(rises) if r == max(rises)}
+    named = set(map(tuple, getattr(task, "correct", ()) or ()))
+    correct = ({i for i, (t, o) in enumerate(opts) if (t.name, o.name) in named} or
+               {i for i, r in enumerate(reached) if r} or {i for i, r in enumerate(rises) if r == max(rises)})
     options = [perceived(task, tube, obj) for tube, obj in opts]
     return options, (lambda i: (rises[i], reached[i])), correct, opts
 
 
-def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = (), trials: int = TRIALS) -> dict:
-    """Agents over seeds x orders on one task. Exploration: the task file's train objects dropped into every tube,
-    in a random order per agent (as the runner explores its train objects), then the trials."""
-    from sim.apparatus import outcome
-    options, world, correct, opts = task_world(task)
+def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = (), trials: int = TRIALS,
+             outcome=None) -> dict:
+    """Agents over seeds x orders on one task. Exploration: the task file's train objects dropped into every open tube,
+    in a random order per agent (as the runner explores its train objects), then the trials. outcome: the world
+    (default sim.apparatus.outcome)."""
+    if outcome is None:
+        from sim.apparatus import outcome
+    options, world, correct, opts = task_world(task, outcome)
     train = list(getattr(task, "train", ()))
     right, choices = [], []
     for s in seeds:
         agent = context_agent(make_config(model, ablate, seed=s, extra=len(train) * len(task.tubes) + trials + 8),
                               orders)
-        explore_opts = [(tube, obj) for obj in train for tube in task.tubes]
+        explore_opts = [(tube, obj) for obj in train for tube in task.tubes if getattr(tube, "open", True)]
         levels = {t.name: t.level_cm for t in task.tubes}
         ex = [perceived(task, tube, obj) for tube, obj in explore_opts]
         ex_out = [outcome(task, dict(levels), tube, obj) for tube, obj in explore_opts]
