@@ -157,10 +157,10 @@ def load(path: str | os.PathLike) -> dict:
     if not ok:
         raise CheckpointError(f"{path}: checksum mismatch, the file is damaged")
     _from_before_models(state)
-    problem = structure_problem(state)
+    problem = structure_problem(state, size)
     if problem:
         raise CheckpointError(f"{path}: wrong structure: {problem}")
-    from train.experiment import state_problem   # here: train.experiment imports this module
+    from train.checkpoint_values import state_problem
     if problem := state_problem(state["experiment"], state["run"]):
         raise CheckpointError(f"{path}: out of range: {problem}")
     return _in_memory(state)
@@ -184,7 +184,8 @@ def upgrade(path: str | os.PathLike) -> None:
     raw = torch.load(path, map_location="cpu", weights_only=True, mmap=True)
     if not isinstance(raw, dict) or set(raw) != {"run", "experiment"}:
         raise CheckpointError(f"{path} is not a checkpoint of the older version")
-    if problem := tensor_problem(raw, Path(path).stat().st_size) or structure_problem(raw):
+    size = Path(path).stat().st_size
+    if problem := tensor_problem(raw, size) or structure_problem(raw, size):
         raise CheckpointError(f"{path}: wrong structure: {problem}")
     save_atomic(_in_memory(raw), path)
 
@@ -258,10 +259,11 @@ def _finite(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
 
 
-def structure_problem(state: dict) -> str | None:
+def structure_problem(state: dict, budget: int = MAX_BYTES) -> str | None:
     """What is wrong with a checkpoint's content (the first problem found), or None. Checks every key and type,
     that orders are permutations, records and outcomes fit the episodes done, and that the agents' tensors have
-    exactly the names, shapes and dtypes of agents built from the stored config."""
+    exactly the names, shapes and dtypes of agents built from the stored config, whose buffers must fit in `budget`
+    bytes (the file's size)."""
     if not isinstance(state.get("run"), dict) or not isinstance(state.get("experiment"), dict):
         return "'run' and 'experiment' must be dicts"
     if p := _typed(state["run"], RUN_KEYS, "run"):
@@ -299,7 +301,7 @@ def structure_problem(state: dict) -> str | None:
         missing = {names[o[i]] for o in e["orders"] for i in range(e["t"])} - set(e["outcomes"])
         if missing:
             return f"no outcome for {sorted(missing)[0]!r}, which was already dropped"
-    return _agent_problem(e)
+    return _agent_problem(e, budget)
 
 
 def _measurement_ok(m) -> bool:
@@ -314,7 +316,7 @@ def _measurement_ok(m) -> bool:
     return True
 
 
-def _agent_problem(e: dict) -> str | None:
+def _agent_problem(e: dict, budget: int) -> str | None:
     import torch
 
     from aesop_torch.agent import Agent, AgentConfig
@@ -328,13 +330,18 @@ def _agent_problem(e: dict) -> str | None:
         return f"config is not an agent's config ({type(err).__name__})"
     try:
         # the agents as train.experiment.Experiment builds them (its __post_init__: seed, buffers sized to the train
-        # objects), without importing it (it imports this module); on the meta device: shapes and dtypes only, so
-        # a config asking for huge buffers costs nothing
+        # objects), without importing it (it imports this module)
         config.seed = e["seed"]
         config.memory.max_episodes = min(config.memory.max_episodes, len(e["train_names"]))
         config.hub.max_assemblies = min(config.hub.max_assemblies, len(e["train_names"]))
-        with torch.device("meta"):
-            like = Agent(config, batch=len(e["orders"]), develop=False).state_dict()
+        # two of its buffers (memory.patterns, hub.assemblies: one byte an element) already need this much; the
+        # stored ones, the same shapes, fit in the file (tensor_problem): a config asking for more is refused here,
+        # before agents that large are built (the meta device would cost nothing but takes seconds to set up)
+        need = len(e["orders"]) * (config.memory.max_episodes * config.memory.rows * config.memory.cols
+                                   + config.hub.max_assemblies * config.hub.n_neurons)
+        if need > budget:
+            return f"config asks for agents of more than {need:,} bytes, the file has {budget:,}"
+        like = Agent(config, batch=len(e["orders"]), develop=False).state_dict()
     except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
         return f"config does not build an agent ({type(err).__name__})"
     got = e["agent"]

@@ -1,0 +1,114 @@
+"""A checkpoint's values within their ranges, before an Experiment is restored from them.
+
+train.checkpoint.load calls `state_problem` after its structure check (keys, types, shapes and dtypes are right),
+without importing train.experiment (which imports train.checkpoint).
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+
+def state_problem(e: dict, run: dict) -> str | None:
+    """What is out of range in a checkpoint's experiment (`Experiment.state_dict`) and run, or None: the run's
+    objects as the objects file would take them, the names they give, each part's values (`_outcomes_problem`,
+    `_records_problem`, `_agent_values_problem`). The config is checked with the structure (train.checkpoint)."""
+    from sim.objects import ObjectsFileError, parse_objects
+    try:
+        objects = parse_objects(run["objects"])
+    except ObjectsFileError as err:
+        return f"the run's objects: {err}"
+    if [o.name for o in objects.train] != e["train_names"] or [o.name for o in objects.probe] != e["probe_names"]:
+        return "the run's objects are not the experiment's train and probe objects"
+    return (_outcomes_problem(e, objects.jar) or _records_problem(e) or _agent_values_problem(e))
+
+
+def _measurement_problem(m: dict) -> str | None:
+    """What the senses cannot have measured: a mean pixel colour outside 0..1, a fill (volume over bounding box)
+    outside (0, 1], an extent or a felt mass that is not positive (the encoders take their logs)."""
+    if not all(0.0 <= x <= 1.0 for x in m["rgb"]):
+        return f"rgb {m['rgb']} outside 0..1"
+    if not 0.0 < m["fill"] <= 1.0:
+        return f"fill {m['fill']} outside (0, 1]"
+    if not all(x > 0 for x in m["extent_cm"]) or not m["mass_g"] > 0:
+        return f"extent_cm {m['extent_cm']} or mass_g {m['mass_g']} not positive"
+    return None
+
+
+def _outcomes_problem(e: dict, jar) -> str | None:
+    """Outcomes and probes: measurements the senses can give, and volumes no larger than the jar (a drop cannot
+    raise the level by more than the jar is tall, nor an object displace more than the jar holds)."""
+    jar_cm3 = jar.area_cm2 * jar.height_cm
+    for kind, table in (("outcome", e["outcomes"]), ("probe", e["probes"])):
+        for name, o in table.items():
+            if p := _measurement_problem(o["measurement"]):
+                return f"{kind} of {name!r}: {p}"
+            volumes = [o["archimedes_cm3"]] + ([o["observed_cm3"]] if kind == "outcome" else [])
+            if not 0.0 < o["archimedes_cm3"] <= jar_cm3 or any(abs(v) > jar_cm3 for v in volumes):
+                return (f"{kind} of {name!r}: a volume of {max(map(abs, volumes)):g} cm^3, the jar holds "
+                        f"{jar_cm3:.0f} cm^3")
+    return None
+
+
+def _records_problem(e: dict) -> str | None:
+    """Each order's records name the objects its order dropped, in that order."""
+    names = e["train_names"]
+    for b, (order, records) in enumerate(zip(e["orders"], e["records"])):
+        for i, rec in enumerate(records):
+            if rec.get("object") != names[order[i]] or not isinstance(rec.get("encoded"), bool):
+                return f"order {b + 1}'s episode {i + 1} is not a record of {names[order[i]]!r}"
+    return None
+
+
+def _agent_values_problem(e: dict) -> str | None:
+    """The agents' values within the bounds their learning keeps them in, and their counts within the t episodes
+    the records hold (a rolled-back t leaves episodes the records do not account for).
+    - maps' codebooks in 0..1: every map's input lies in 0..1 (rgb; fill and the extent ratios, sorted descending;
+      size and mass on the log unit of their range, where the developmental samples are drawn; unit-length
+      non-negative word vectors) and a SOM unit starts at a sample and only moves to weighted means of samples;
+    - maps' locations: the grid the map's config gives (rebuilt, never learned);
+    - pathway strengths in [0, max(1, rules.dominant_strength)]: they start at 1, Growth raises them up to the
+      dominant strength, Elimination and Uncertainty only lower them;
+    - the hub's branches in 0..1 (map activities) and their norms at most sqrt(units);
+    - episodes stored (memory.count) at most the records' encoded episodes; assemblies at most t; a neuron's usage at
+      most the assemblies; rules fired once per property and episode; states codes of rules.STATES."""
+    from aesop_torch.encoders import default_map_configs
+    from aesop_torch.rules import STATES
+    from aesop_torch.som import SelfOrganizingMap
+
+    a, t, cfg = e["agent"], e["t"], e["config"]
+    top = max(1.0, float(cfg["rules"]["dominant_strength"]))
+    encoded = torch.tensor([sum(r["encoded"] for r in rec) for rec in e["records"]])
+    n_assemblies = a["hub.n_assemblies"]
+
+    def within(key, lo, hi) -> str | None:
+        v = a[key]
+        if v.numel() and not (bool((v >= lo).all()) and bool((v <= hi).all())):
+            return f"agent state {key!r} holds values outside [{lo:g}, {hi:g}] ({float(v.min()):g} .. {float(v.max()):g})"
+        return None
+
+    for name, map_config in default_map_configs().items():
+        if p := within(f"maps.{name}.weights", 0.0, 1.0):
+            return p
+        if not torch.equal(a[f"maps.{name}.locations"], SelfOrganizingMap(map_config).locations):
+            return f"agent state 'maps.{name}.locations' is not the map's grid"
+    checks = [("hub.strength", 0.0, top), ("hub.branches", 0.0, 1.0),
+              ("hub.branch_norm", 0.0, math.sqrt(a["hub.branches"].shape[-1])), ("memory.count", 0, t),
+              ("hub.n_assemblies", 0, t), ("hub.usage", 0, t), ("rules.state", 0, len(STATES) - 1)]
+    if "rules.strength" in a:   # the paper model's rules
+        checks += [("rules.strength", 0.0, top), ("rules.fired", 0, t)]
+    if "rules.uncertain_count" in a:   # the extended model's
+        checks += [("rules.uncertain_count", 0, t)]
+    for key, lo, hi in checks:
+        if p := within(key, lo, hi):
+            return p
+    if (a["memory.count"] > encoded).any():
+        return (f"the agents hold {a['memory.count'].tolist()} episodes, their records encoded "
+                f"{encoded.tolist()} (t = {t})")
+    if (a["hub.usage"] > n_assemblies[:, None]).any():
+        return "a hub neuron is used by more assemblies than the hub holds"
+    if "rules.fired" in a and (a["rules.fired"].sum(-1) > t).any():
+        return f"the rules fired more than once per property in {t} episode(s)"
+    return None
