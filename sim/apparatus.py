@@ -180,6 +180,17 @@ class _Got(Exception):
 
 def parse_task(data, name: str = "task", config: TaskConfig = TaskConfig(),
                objects_config: ObjectsConfig = ObjectsConfig()) -> Task:
+    """Validate a task file's decoded JSON; TaskFileError (one line) if anything is wrong, whichever of
+    sim.objects' checks (reused for objects and fields) found it."""
+    try:
+        return _parse_task(data, name, config, objects_config)
+    except TaskFileError:
+        raise
+    except ObjectsFileError as e:
+        raise TaskFileError(str(e)) from None
+
+
+def _parse_task(data, name: str, config: TaskConfig, objects_config: ObjectsConfig) -> Task:
     if not isinstance(data, dict):
         raise TaskFileError("the task file must be a JSON object with 'apparatus' and 'objects'")
     _no_unknown_keys(data, TOP_KEYS, "the task file")

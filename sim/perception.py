@@ -362,3 +362,24 @@ def rests_on_bottom(client: int, body: int, hidden: tuple, jar_xy, bottom_z: flo
         return False    # nothing of it near the bottom: it floats above the view
     lowest = view.back_project(rows, cols, dv=0.5)[:, 2].min()   # each pixel's lower edge
     return bool(lowest - bottom_z < tolerance_m)
+
+
+def perceive_tube(client: int, contents: int, tube_xy, bottom_z: float, rim_z: float,
+                  camera: CameraConfig = CameraConfig(), fov_deg: float = 25.0) -> dict:
+    """A tube of the Aesop battery (sim/tubes.py) seen from straight above its mouth: what fills it.
+
+    contents: the body of its water (the visual) or its bed, segmented as an object is. The robot knows where the
+    tube stands, its floor and its rim (its workspace), not what is in it. Returns {"width_cm": the contents' outline
+    across (the tube's inner width), "level_cm": the surface's height above the floor (the median of its pixels'
+    back-projected heights: a floating reward's pixels are not the contents'), "substrate_rgb": their mean colour in
+    flat light}. 25 degrees from 30 cm above the rim holds a 13 cm wide tube."""
+    x, y = float(tube_xy[0]), float(tube_xy[1])
+    v = take_view(client, [x, y, rim_z + 0.30], [x, y, bottom_z], [1, 0, 0], fov_deg, camera.width, camera.width,
+                  camera.near, camera.far)
+    mask = _mask(v, contents, "tube", 20)
+    xy, px = outline(v, mask)
+    _, sides = outline_rect(xy, px)
+    rows, cols = np.nonzero(mask)
+    z = v.back_project(rows, cols)[:, 2]
+    return {"width_cm": float(np.mean(sides)) * 100.0, "level_cm": float(np.median(z) - bottom_z) * 100.0,
+            "substrate_rgb": [float(c) for c in v.rgb[mask].mean(axis=0) / 255.0]}

@@ -164,9 +164,10 @@ class Water:
         """Height of the surface above the jar's inner bottom, m."""
         return self.level - self.bottom_z
 
-    def add_body(self, body_id: int, shape: str, size_xyz):
-        """Register a body (its frame at its centre, z along its axis); mass and inertia are read from pybullet."""
-        pts, w, spacing = sample_points(shape, size_xyz, self.config.points_per_body)
+    def add_body(self, body_id: int, shape: str, size_xyz, cloud=None):
+        """Register a body (its frame at its centre, z along its axis); mass and inertia are read from pybullet.
+        cloud: (points, weights, spacing) of a body that is not a solid primitive (a hollow cup: its walls only)."""
+        pts, w, spacing = cloud if cloud is not None else sample_points(shape, size_xyz, self.config.points_per_body)
         info = p.getDynamicsInfo(body_id, -1, physicsClientId=self.client)
         reach = float(np.linalg.norm(pts, axis=1).max())
         bound = reach + float(np.linalg.norm(spacing)) / 2  # the points and their cells
@@ -189,6 +190,12 @@ class Water:
         for b in self.bodies.values():
             b.v_sub, b.cob = 0.0, None
 
+    def column(self, pos) -> tuple[float, float, float]:
+        """The cylinder of water a body at `pos` is in: (axis x, axis y, inner radius). One jar here; tubes joined by
+        a hidden channel (sim/tubes.py) answer with the tube the body is in, sharing one level and one area."""
+        cx, cy = self.center_xy
+        return cx, cy, self.radius
+
     def update_level(self) -> list:
         """Solve the level for the bodies' current poses; returns [(id, body, position)] of the bodies in water.
 
@@ -200,12 +207,12 @@ class Water:
         are wet, or dry, at any level in the band; a level found outside the band is solved again over every point.
         """
         c, cl = self.config, self.client
-        cx, cy = self.center_xy
         wet_volume, cut, caps, out = 0.0, [], [], []
         for bid, b in self.bodies.items():
             pos, orn = p.getBasePositionAndOrientation(bid, physicsClientId=cl)
+            cx, cy, radius = self.column(pos)
             off_axis = math.hypot(pos[0] - cx, pos[1] - cy)
-            if (off_axis - b.bound >= self.radius or pos[2] - b.bound >= self.level + c.shortcut_margin_m
+            if (off_axis - b.bound >= radius or pos[2] - b.bound >= self.level + c.shortcut_margin_m
                     or pos[2] + b.bound <= self.bottom_z):
                 b.v_sub, b.waterplane, b.cob, b.R = 0.0, 0.0, None, None
                 continue
@@ -215,20 +222,20 @@ class Water:
             up = np.abs(R[2])
             layer = float(up @ b.spacing)                  # the height of a grid cell as posed
             reach_z = min(float(up @ b.half), b.reach)     # no point lies farther above or below the centre
-            walled = off_axis + b.reach >= self.radius     # a point may be outside the wall
+            walled = off_axis + b.reach >= radius          # a point may be outside the wall
             floored = pos[2] - reach_z <= self.bottom_z    # or below the bottom
             if not (walled or floored) and pos[2] + reach_z + 0.5 * layer < self.level - c.shortcut_margin_m:
                 b.v_sub, b.waterplane, b.cob = b.volume, 0.0, pos
                 wet_volume += b.volume
                 continue
-            if b.radius and off_axis + b.radius < self.radius and pos[2] - b.radius > self.bottom_z:
+            if b.radius and off_axis + b.radius < radius and pos[2] - b.radius > self.bottom_z:
                 caps.append((b, pos))   # a whole sphere in the jar: its wet part is a cap
                 continue
             z = R[2] @ b.points_t + pos[2]
             w = b.weights
             if walled or floored:
                 x, y = R[0] @ b.points_t + (pos[0] - cx), R[1] @ b.points_t + (pos[1] - cy)
-                w = w * ((x * x + y * y < self.radius ** 2) & (z > self.bottom_z))
+                w = w * ((x * x + y * y < radius ** 2) & (z > self.bottom_z))
             cut.append((b, pos, z, w, layer))
         base = self.bottom_z + (self.water_volume + wet_volume) / self.area
         if not cut and not caps:
