@@ -86,7 +86,8 @@ def _agent_values_problem(e: dict) -> str | None:
     def within(key, lo, hi) -> str | None:
         v = a[key]
         if v.numel() and not (bool((v >= lo).all()) and bool((v <= hi).all())):
-            return f"agent state {key!r} holds values outside [{lo:g}, {hi:g}] ({float(v.min()):g} .. {float(v.max()):g})"
+            return (f"agent state {key!r} holds values outside [{lo:g}, {hi:g}] "
+                    f"({float(v.min()):g} .. {float(v.max()):g})")
         return None
 
     for name, map_config in default_map_configs().items():
