@@ -24,6 +24,12 @@ irrelevant (a physically wrong elimination). Last line:
 extended_rules_off_ratio_24=` (err_24 from the sets of 24, err_64 and err_230 from the lives; a ratio is the ablated
 model's error over the model's). `--record` writes the output into BENCHMARKS.md.
 
+The agent conditions (the six above) run as the sweep benches/ablation.toml runs them: each (condition, set) is
+train/sweep.py's cell (`train.sweep.run_cell`, one code path) and their figures are train/report.py's medians, so
+`python train/sweep.py benches/ablation.toml` then `python -m train.report` gives these figures digit for digit (and
+at scale, on a Ray cluster). The peers and paper +knowledge (its knowledge set by hand) are no sweep conditions: they
+run here, their medians taken the same way.
+
 Numbers of the models were chosen on seeds 1000 and up; the default seeds (0..) are for reporting.
 """
 
@@ -31,6 +37,7 @@ from __future__ import annotations
 
 import argparse
 import multiprocessing
+import statistics
 import sys
 import time
 from pathlib import Path
@@ -51,6 +58,8 @@ from train.experiment import closed_form_outcomes, draw_orders, stack_measuremen
 from train.population import knowledge_keys  # noqa: E402
 from train.physics import cores  # noqa: E402
 from train.progress import Step  # noqa: E402
+from train import sweep  # noqa: E402
+from train.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
 
@@ -135,9 +144,48 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     return {"errors": errs, "keys": knowledge_keys(agent.rules.state), "state": agent.rules.state.clone()}
 
 
+# the sweep file's set groups (benches/ablation.toml) of the bench's three kinds of set
+GROUPS = {"8": "sets of 8", "24": "sets of 24", "life": "lives"}
+
+
+def sweep_doc(conditions, plan, first_seed: int) -> dict:
+    """The agent conditions and sets of this run as a sweep file (benches/ablation.toml at the defaults)."""
+    return {"world": "closed_form",
+            "conditions": [{"name": c, "model": MODELS[c][0], "ablate": list(MODELS[c][1])} for c in conditions],
+            "sets": [{"name": GROUPS[kind], "generate": {"seeds": [first_seed, first_seed + n_sets], "train": n_train,
+                                                         "probe": n_probe, "pairs": True},
+                      "orders": n_orders, "checks": list(checks)}
+                     for kind, n_sets, n_train, n_probe, n_orders, checks in plan if n_sets]}
+
+
 def _task(t):
     torch.set_num_threads(1)
+    if t[0] == "cell":   # an agent condition: the sweep's cell
+        return sweep.run_cell(t[1]["spec"], t[1]["objects"])
     return run(*t[1:])
+
+
+def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None):
+    """The rows (a pyarrow Table of train.sweep.schema()) of the agent conditions on the plan's sets: the sweep's
+    cells, run on `workers` processes. Equal, row for row, to train/sweep.py on sweep_doc's file."""
+    import pyarrow as pa
+    _, cells = sweep.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
+    with multiprocessing.get_context("fork").Pool(workers) as pool:
+        tables = []
+        for t in pool.imap(_task, [("cell", c) for c in cells]):
+            tables.append(t)
+            if bar is not None:
+                bar.update(1)
+    return pa.concat_tables(tables)
+
+
+def final_share(table, condition: str, group: str, prop: str, letter: str) -> float:
+    """The share of (set, order) whose final knowledge of prop (a rows column: color, weight, size, shape) is letter."""
+    import pyarrow.compute as pc
+    m = pc.and_(pc.and_(pc.equal(table.column("condition"), condition), pc.equal(table.column("set_group"), group)),
+                pc.equal(table.column("episode"), table.column("n_train")))
+    v = table.filter(m).column(prop).to_pylist()
+    return sum(x == letter for x in v) / len(v)
 
 
 def main():
@@ -162,21 +210,34 @@ def main():
     life_checks = tuple(n for n in LIFE_CHECKS if n < a.life_objects) + (a.life_objects,)
     plan = [("8", a.sets, 8, 8, a.orders, (8,)), ("24", a.long_sets, 24, 8, a.orders, (8, 24)),
             ("life", a.lives, a.life_objects, 16, 1, life_checks)]
+    agents = [c for c in conditions if c in MODELS]
+    others = [c for c in conditions if c not in MODELS]
     # every (condition, set) is a task of its own, run on --workers processes (each a deterministic function of its
     # arguments: the result does not depend on the worker count); the longest (lives) first
     tasks = [(kind, c, a.first_seed + i, n_train, n_probe, n_orders, checks)
-             for kind, n_sets, n_train, n_probe, n_orders, checks in reversed(plan) for c in conditions
+             for kind, n_sets, n_train, n_probe, n_orders, checks in reversed(plan) for c in others
              for i in range(n_sets)]
-    res = {(kind, c): [None] * n for kind, n, *_ in plan for c in conditions}
-    with multiprocessing.get_context("fork").Pool(a.workers) as pool, \
-            Step("(condition, set) runs", len(tasks), unit="run", stream=sys.stderr) as bar:
-        for (kind, c, s, *_), r in zip(tasks, pool.imap(_task, tasks)):
-            res[kind, c][s - a.first_seed] = r
-            bar.update(1)
-    print(f"{len(tasks)} runs on {a.workers} process(es): {time.perf_counter() - t0:.0f} s", flush=True)
+    res = {(kind, c): [None] * n for kind, n, *_ in plan for c in others}
+    n_cells = len(agents) * sum(n for _, n, *_ in plan)
+    with Step("(condition, set) runs", len(tasks) + n_cells, unit="run", stream=sys.stderr) as bar:
+        rows = agent_rows(agents, plan, a.first_seed, a.workers, bar) if agents else None
+        with multiprocessing.get_context("fork").Pool(a.workers) as pool:
+            for (kind, c, s, *_), r in zip(tasks, pool.imap(_task, tasks)):
+                res[kind, c][s - a.first_seed] = r
+                bar.update(1)
+    summary = summarise(rows) if agents else {"errors": {}, "knowledge": {}}
+    print(f"{len(tasks) + n_cells} runs on {a.workers} process(es): {time.perf_counter() - t0:.0f} s", flush=True)
 
     def err(kind, c, n):
-        return float(torch.cat([r["errors"][n] for r in res[kind, c]]).median())
+        """The median over (set, order) of the median over probes: train/report.py's for an agent condition."""
+        if c in MODELS:
+            return summary["errors"][c, GROUPS[kind]][n][1]
+        return statistics.median(torch.cat([r["errors"][n] for r in res[kind, c]]).tolist())
+
+    def same(kind, c):
+        if c in MODELS:
+            return summary["knowledge"][c, GROUPS[kind]]["order_agreement"]
+        return sum(len(set(r["keys"])) == 1 for r in res[kind, c]) / len(res[kind, c])
 
     cols = [("8", 8, "8 (sets of 8)"), ("24", 24, "24 (sets of 24)")] + [("life", n, f"{n} (lives)")
                                                                            for n in life_checks]
@@ -191,12 +252,15 @@ def main():
     for c in conditions:
         if c in PEERS:
             continue
-        same = [sum(len(set(r["keys"])) == 1 for r in res[k, c]) / len(res[k, c]) for k in ("8", "24")]
 
         def share(p, code):
+            if c in MODELS:
+                prop = ("color", "shape", "size", "weight")[p]
+                return "/".join(f"{final_share(rows, c, GROUPS[k], prop, sweep.KNOWLEDGE_LETTERS[code]):.2f}"
+                                for k in ("8", "24", "life"))
             parts = [torch.cat([r["state"][:, p] for r in res[k, c]]) for k in ("8", "24", "life")]
             return "/".join(f"{float((x == code).float().mean()):.2f}" for x in parts)
-        print(f"{c:<17}{same[0]:>10.3f}{same[1]:>10.3f}  {share(0, IRRELEVANT)}  {share(0, DOMINANT)}  "
+        print(f"{c:<17}{same('8', c):>10.3f}{same('24', c):>10.3f}  {share(0, IRRELEVANT)}  {share(0, DOMINANT)}  "
               f"{share(3, IRRELEVANT)}  {share(2, IRRELEVANT)}")
     print(f"{time.perf_counter() - t0:.0f} s")
 
@@ -209,7 +273,7 @@ def main():
         line["paper_err_230"] = err("life", "paper", life_checks[-1])
         if "paper -rules" in conditions:
             line["paper_rules_off_ratio_230"] = ratio("paper -rules", "paper", "life", life_checks[-1])
-        line["paper_order_agreement_8"] = sum(len(set(r["keys"])) == 1 for r in res["8", "paper"]) / a.sets
+        line["paper_order_agreement_8"] = same("8", "paper")
     if "extended" in conditions:
         line["extended_err_8"] = err("8", "extended", 8)
         if "extended -rules" in conditions:

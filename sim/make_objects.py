@@ -32,6 +32,9 @@ from pathlib import Path
 
 import numpy as np
 
+if __package__ in (None, ""):  # run as a script: make the project importable without installing it
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
 from sim.objects import PALETTE, ObjectsConfig, ObjectsFileError, _printable, parse_objects
 
 PROG = "python -m sim.make_objects"
@@ -286,8 +289,8 @@ def main(argv=None) -> int:
     try:
         a = ap.parse_args(argv)
         if not 0 <= a.seed < 2 ** 63 or not 4 <= a.train <= config.max_objects or not 0 <= a.probe <= 1000:
-            raise UsageError(f"--seed must be in 0..2^63-1, --train in 4..{config.max_objects} (the objects file's limit), "
-                             f"--probe in 0..1000")
+            raise UsageError(f"--seed must be in 0..2^63-1, --train in 4..{config.max_objects} (the objects "
+                             f"file's limit), --probe in 0..1000")
         out = None if a.out == "-" else Path(a.out)
         if out is not None and (why := _out_problem(out, a.force)):
             raise UsageError(why)          # before the work, as well as when writing

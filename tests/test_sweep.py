@@ -1,6 +1,6 @@
 """train/sweep.py and train/report.py: a sweep on Ray gives the rows its cells give in-process, an interrupted sweep
 resumes to the same table, a bad sweep file is refused in one line, and the report's figures are the table's.
-One local Ray instance (2 CPUs) serves the whole module: starting one takes seconds."""
+One local Ray instance (2 CPUs, tests/conftest.py local_ray) serves the whole module."""
 
 import json
 import subprocess
@@ -32,15 +32,6 @@ generate = { seeds = [5, 7], train = 4, probe = 3, pairs = false }
 orders = 2
 checks = [1, 3, 4]
 """
-
-
-@pytest.fixture(scope="module")
-def local_ray():
-    import ray
-    started = sweep.start_ray(None, 2)
-    yield
-    if started:
-        ray.shutdown()
 
 
 def _write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:

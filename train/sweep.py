@@ -306,6 +306,12 @@ def load_sweep(path: Path) -> tuple[dict, list[dict]]:
         raise SweepError(f"{path}: {e}") from None
 
 
+def resolve(doc: dict, base: Path) -> tuple[dict, list[dict]]:
+    """load_sweep for a sweep file already read into a dict (a bench that builds its cells from its flags); objects
+    files relative to base. SweepError (one line) for anything wrong."""
+    return _resolve(doc, Path(base))
+
+
 def _resolve(doc: dict, base: Path) -> tuple[dict, list[dict]]:
     _keys(doc, TOP_KEYS, "the sweep file")
     if "description" in doc and not isinstance(doc["description"], str):
