@@ -16,29 +16,14 @@ Choices the paper leaves open, made here (where one model only, it says which):
 - Graded maps, read as populations. An object is stored in the hub as the bump of activity around each map's winner
   (hub.ObjectHub.allocate), and a map's activity, bottom-up or retro-activated from a recalled episode, is read
   as a population vector (SelfOrganizingMap.decode): values between units, not only at a winner's codebook vector.
-- Which recalled episode the rules compare against: the strongest (paper), each of them (extended). Every compared
-  episode is one comparison, with DeltaProperty (the property's decoded bottom-up value against the value that
-  episode retro-activates, through the pathway's strength in the comparison's context: an eliminated pathway
-  retro-activates nothing, so it shows no change) and DeltaContradiction (the observed volume against that
+- Which recalled episode the rules compare against (comparisons.py): the strongest (paper), each of them (extended).
+  Every compared episode is one comparison, with DeltaProperty (the property's decoded bottom-up value against the
+  value that episode retro-activates, through the pathway's strength in the comparison's context: an eliminated
+  pathway retro-activates nothing, so it shows no change) and DeltaContradiction (the observed volume against that
   episode's) judged against the same past event.
-- Prediction (extended; the paper model averages the recalled rewards): a recall-strength-weighted readout that
-  follows the properties the rules have not ruled out. Recalled
-  episodes are split by what became of their objects (floated or sank); within each, the log reward is fitted as a
-  linear function of the properties that context has not eliminated (one eliminated in the other context is still
-  followed), its dominant ones among them (weighted least squares, weights = recall strength, Huber-reweighted so that
-  an episode far off its fit counts less), and read at the present object's values. Size enters as the volume the
-  object fills (fill x size^3, `as_volume`), so shape and size followed together are one slope, not two. An extensive
-  property (size as the volume, weight: what adds up over an object's parts) enters alone as a proportion, twice the
-  volume or the mass read as twice the effect, its ratio fitted; in a fit that reads the mass each episode weighs by
-  how well its mass was felt (a light object's is not). Of the properties a context follows, the fit uses the one that
-  predicts its recalled rewards best when each is left out (weighted leave-one-out residuals), all of them only where
-  too few episodes were recalled to fit any alone: the rules say which properties may matter, the rewards which one
-  does, and a fit on properties that moved together over a handful of episodes extrapolates wildly off their line (the
-  default set's three floaters, whose mass fell as their volume grew, put a 120 g floater at 6,600 cm^3). Which fit
-  applies, when both exist, comes from the recalled fates too: a logistic boundary over how much more the object would
-  displace floating than sinking by the two fits (an object that would displace more than the room it fills sinks;
-  where the fates sit on it is learned), or over the properties not known irrelevant while a fate has too few episodes
-  to choose a fit. Both fits and the probability are kept (Anticipation.by_fate, p_sink): a chooser can weigh the two.
+- Prediction (extended; the paper model averages the recalled rewards): a recall-strength-weighted readout fitted
+  within each fate on the properties the rules have not ruled out, with the task's physics priors
+  (fitted_readout.py).
 - Names: a teacher's words (measurement["words"], e.g. the object's name) are bound to the object's hub assembly
   one-shot like its properties, every named object with an assembly of its own; they stay out of the cue of an
   object in view (AgentConfig.names_in_cue), so naming changes no recall. `imagine` goes the other way: words, no
@@ -57,218 +42,32 @@ Choices the paper leaves open, made here (where one model only, it says which):
 
 from __future__ import annotations
 
-import math
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import dataclass, replace
 
 import torch
 from torch import nn
 
-from .encoders import (FUNCTION_WORDS, GOAL_WORDS, PROPERTIES, VOCABULARY, WORD_MAP, EncoderConfig, SensoryEncoder,
+from . import comparisons, fitted_readout
+from .agent_config import (ABLATIONS, AGENT_ROW_K, MODELS, OBJECT_ROWS, ROW_BODY_END, ROW_BODY_START, ROW_DROP,
+                           ROW_FATE_UNSEEN, ROW_GRASP, ROW_OBJECT, ROW_REACH, ROW_REWARD, ROW_REWARD_FINE, AgentConfig)
+from .comparisons import cannot_tell
+from .encoders import (FUNCTION_WORDS, GOAL_WORDS, PROPERTIES, VOCABULARY, WORD_MAP, SensoryEncoder,
                        default_map_configs, encode_words, train_property_maps, unknown_words, word_activity)
-from .hub import ActionHub, BodyHub, HubConfig, ObjectHub, RewardCode, _relative
-from .memory import EpisodicMemory, MemoryConfig
+from .fitted_readout import EXTENSIVE, FEATURE_COLUMNS, as_volume, feature_columns
+from .hub import ActionHub, BodyHub, ObjectHub, RewardCode, _relative
 from .incremental_rules import IncrementalRules
+from .memory import EpisodicMemory
 from .readouts import recall_average
-from .rules import (ELIMINATION, GROWTH, IRRELEVANT, STATUS_QUO, UNCERTAINTY, CausalRules, RulesConfig,
-                    context_of, contradiction, outcome_unclear)
+from .rules import ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules
 from .som import SelfOrganizingMap
 
-# Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order, and the object hub's other
-# rows. ROW_REWARD holds the reward's coarse unit in the half of the object's fate (floated: units 0-24, sank:
-# 25-49); ROW_FATE_UNSEEN marks an episode whose fate was not seen (its reward then sits in the first half).
-(ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE_UNSEEN,
- ROW_REWARD_FINE) = range(9)
-OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows of 50, 2 neurons of each per object
-AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
-# the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass
-FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 5), "weight": slice(5, 6)}
+# re-exported: the names other modules import from here (the config, the sheet's layout, the readout's features)
+__all__ = ["ABLATIONS", "AGENT_ROW_K", "EXTENSIVE", "FEATURE_COLUMNS", "MODELS", "OBJECT_ROWS", "ROW_BODY_END",
+           "ROW_BODY_START", "ROW_DROP", "ROW_FATE_UNSEEN", "ROW_GRASP", "ROW_OBJECT", "ROW_REACH", "ROW_REWARD",
+           "ROW_REWARD_FINE", "Agent", "AgentConfig", "Anticipation", "EpisodeStep", "Goal", "Imagination",
+           "as_volume", "cannot_tell", "feature_columns", "BODY_ROWS", "GOAL_START", "GOAL_STATE", "NAME_SAME"]
 
-
-def feature_columns(by_property: torch.Tensor) -> torch.Tensor:
-    """(..., P) bool per property -> (..., 6) bool per readout feature column (FEATURE_COLUMNS)."""
-    return torch.cat([by_property[..., i, None].expand(*by_property.shape[:-1], c.stop - c.start)
-                      for i, c in enumerate(FEATURE_COLUMNS[p] for p in PROPERTIES)], -1)
-
-
-_SHAPE, _SIZE, _WEIGHT = (FEATURE_COLUMNS[p].start for p in ("shape", "size", "weight"))
-# the extensive properties, whose alone-fit is a proportion (slope 1 in logs), and their readout columns (size read as
-# the volume, `as_volume`): what an object does to the water adds up over its parts, so twice the volume or twice
-# the mass is read as twice the effect; colour and shape (fill, extent ratios) do not add up and get a free slope
-EXTENSIVE = {"size": _SIZE, "weight": _WEIGHT}
-
-
-def as_volume(features: torch.Tensor, columns: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-    """The fit's features and columns: the size column becomes the log of the volume the object fills, fill x
-    size^3 (size is the cube root of the bounding box), and the shape column is kept only where size is not
-    followed (the volume carries the fill). Size and shape followed together are then one slope: with the handful
-    of episodes a fate has after 8 objects, a fit on fill and size apart has one slope too many (median novel-object
-    error after 8 episodes 24.6 % apart, 13.9 % as a volume; generated sets of tuning seeds 1000-1044)."""
-    out = features.clone()
-    out[..., _SIZE] = features[..., _SHAPE] + 3.0 * features[..., _SIZE]
-    columns = columns.clone()
-    columns[..., _SHAPE] &= ~columns[..., _SIZE]
-    return out, columns
-
-
-MODELS = ("paper", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}
 NAME_SAME = 0.99   # name_match of an object's own name is 1 up to float rounding; one word of 6 changed gives 0.83
-
-
-@dataclass
-class AgentConfig:
-    encoder: EncoderConfig = field(default_factory=EncoderConfig)
-    # the object hub spans the 12 rows the episode's events leave free (OBJECT_ROWS), 2 neurons of each per object:
-    # the memory's lifetime capacity for the agent's own episodes. Its other rows are shared by every episode (the
-    # same reach, grasp and drop) or take one of a few codes, so the object's code is what sets one episode apart;
-    # from one 5-neuron row, exact recall from the object cue held to ~32 episodes, from 12 2-neuron rows it holds
-    # to 230 (benches/memory_capacity.py). Sparse 2-of-50 rows are the memory's best case (random episodes: 275).
-    # A full hub refuses a new object (HubConfig.when_full, the library's default, kept here): a run is sized for its
-    # objects (train.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
-    # big for its agents. A longer life sets both when_full to "forget_oldest" or "forget_weakest" (Agent._encode:
-    # an object's assembly and its episodes leave together).
-    hub: HubConfig = field(default_factory=lambda: HubConfig(rows=len(OBJECT_ROWS), assembly_size=2))
-    # the sheet's rows as the agent uses them (OBJECT_ROWS cue the recall), and the reward's coarse and fine units
-    # each on a row of its own (k = 1: its inhibitory pool lets exactly one win, so a recalled reward is always
-    # one coarse and one fine unit; on one shared 2-of-50 row, recalling 16 episodes brought back two coarse units
-    # instead in 22 of 92 recalls). The fate shares the coarse row (a row of its own, floated or sank in every
-    # episode, outweighed the sparse rows in recall: 6 % of 230 episodes came back with the wrong fate)
-    # The hub's cue enters the sheet to the 16th power: a neuron coding for several objects fires for the
-    # best-matching one, so at 230 objects half the hub is driven at >= 0.5 by some partial match; to the 8th, 0.5
-    # clamps at 0.004 while the object's own assembly stays at 1 (exact recall of 230 generated objects from their
-    # cue: 0.4 % as given, 24 % squared, 94 % to the 4th, 99 % to the 8th, as from the exact stored code; tuning
-    # seeds 1000-1009); the 16th, with the symmetric match, kept the agent capacity at 230 on seeds 1000-1019.
-    # Two misses in a row end a recall (MemoryConfig.misses): with the first miss ending it, a novel cue's recall
-    # often stopped with its drive still strong, at a spurious or cycling state. Tuning seeds (`python
-    # benches/learning_curve.py --first-seed 1000`), after 64 / 128 / 230 objects: episodes recalled per probe
-    # cue 48 / 49 / 35 -> 54 / 62 / 78; probes more than 2 points above their senses' floor 14 / 17 / 32 -> 12 / 5 / 4
-    # of 320; error above the floor -0.17 / -0.07 / +0.08 -> -0.05 / -0.10 / -0.16 points (median error 2.11 /
-    # 2.32 / 2.11 -> 2.11 / 2.32 / 2.19 %, at the floor)
-    # No recall bound: a cue brings back every episode the network settles into (~76 of ~180 stored for a novel
-    # object after 230 objects, ~32 ending at the first miss; benches/learning_curve.py). A bound of 16 changed what
-    # a long life learns and predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects:
-    # 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not
-    # a bound for speed
-    # A full memory refuses (MemoryConfig.when_full, the library's default, kept here for the hub's reason above)
-    memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
-                                                                      cue_power=16.0, misses=2, max_recalls=None))
-    rules: RulesConfig = field(default_factory=RulesConfig)
-    # the property maps are trained before the experiment on the infant's prior experience; 4000 samples cover
-    # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
-    som_samples: int = 4000
-    som_epochs: int = 30
-    # DeltaProperty, with a dead zone: a property changed when its decoded values differ by more than the upper
-    # bound, did not when by less than the lower, and a comparison with a property in between is left out (it
-    # cannot tell). Per property (color, shape, size, weight): colour as RGB distance; shape in [fill, extent
-    # ratios]; size and weight as |log ratio|. The bounds match the outcome's (RulesConfig): a size change above
-    # 8 % (26 % in volume) or a mass change above 25 % moves the displacement past the 20 % contradiction
-    # tolerance, one below 3 % (9 % in volume) or 5 % stays near the 5 % as-expected tolerance. Colour 0.15 and
-    # shape 0.1 are far above the camera's noise and below the gaps between named colours (>= 0.4) and between
-    # shape kinds (fill 1, 0.79, 0.52).
-    delta_p_band: tuple = ((0.08, 0.15), (0.08, 0.15), (0.03, 0.077), (0.049, 0.223))
-    # the wrist's noise on the felt mass (sim/world.py WorldConfig.mass_noise_g): a light object's weight is only
-    # called changed beyond 3 sigma of it (added to the weight bounds, as a relative difference of its mass)
-    felt_mass_noise_g: float = 1.0
-    # a readout fit that reads the mass weighs an episode by how well its mass was felt, m^2 / (m^2 + (noise /
-    # this)^2): the wrist's 1 g is 12 % of an 8 g floater, far more than the ~2 % the camera's volume is known to
-    # (three extents at ~0.7 % and the fill at ~0.9 %, sim.sensor_model), which sets the scale. Median novel-object
-    # error after 8 episodes 4.4 % unweighted, 4.1 % weighted; 4.4 % at 0.05 (tuning seeds 1000-1099)
-    readout_rel_precision: float = 0.02
-    # Huber's threshold on a readout fit's residuals (log units): an episode farther off its fit counts with weight
-    # threshold / |residual| (refitted twice). With hundreds of objects stored, a recall can bring back one object's
-    # reward with another's properties (tuning seed 1003, 230 objects: a 1000 g cylinder of 382 cm^3 came back with
-    # a 1000 g box's 470 cm^3), and a least-squares ratio follows it. 0.05 is 2.5x the ~2 % a volume is seen to.
-    # Median novel-object error after 230 objects 2.1 % least squares, 1.75 % with it (tuning seeds 1000-1009);
-    # after 8 / 24 episodes 3.6 / 2.8 % and 3.6 / 2.7 % (1000-1099 / 1000-1029)
-    readout_huber: float = 0.05
-    # a pathway at or below this strength retro-activates nothing (the paper: eliminated, "they no longer will
-    # retro-activate each other"): the rules' eliminated strength (0.05) is below it, an undecided pathway (never
-    # below RulesConfig.uncertain_floor, 0.5) above.
-    retro_floor: float = 0.1
-    # ridge of the readout's fit, relative to its total weight: enough to make a fit on one episode (or on episodes
-    # that share a value) flat instead of singular, too little to bend a fit on values that differ.
-    readout_ridge: float = 1e-5
-    # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
-    # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
-    fate_ridge: float = 1e-2
-    # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
-    # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
-    # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
-    # alike). True: the word map drives the cue like a property map (at its pathway strength, 1).
-    names_in_cue: bool = False
-    # `imagine`: the words must match a stored name at least this well (cosine of the word map's patterns, read
-    # over the assembly's neurons: an object's own name gives 1, a name with one more word than was said 0.82 (2 of
-    # 3 words), one with a word in place of another 0.67) to be taken as naming it; below, the answer is "no object
-    # I know", not a guess. So "blue cylinder" names the blue heavy cylinder and "light blue cube" no yellow cube.
-    imagine_floor: float = 0.75
-    # `hear_goal`: a phrase names the goal when it drives the goal state at least this much, i.e. holds both goal
-    # words (drive = the fraction of them heard): "reach" alone names nothing to reach, "the ball" no action on it
-    goal_floor: float = 0.75
-    # which model (MODELS): "paper", the paper's mechanism and nothing more (rules that edit the pathway strengths
-    # one firing at a time, incremental_rules.py; prediction the recall-strength-weighted average of the recalled
-    # rewards), or "extended" (rules over the evidence set with floating / sinking contexts, rules.py, and a readout
-    # fitted with priors of the task's physics: `readout_by_fate`). `AgentConfig.paper()` / `.extended()`.
-    model: str = "paper"
-    # parts switched off, for ablations (ABLATIONS): "rules" (no rule ever fires: the strengths stay at 1, the
-    # knowledge unknown), "gating" (the memory's cue ignores the strengths: knowledge no longer reaches recall),
-    # "prior" (extended only: the readout's fit without its physics priors: free slopes, size as a length, no volume
-    # feature, a fate boundary over the properties)
-    ablate: tuple = ()
-    # the paper model's readout weighs each recalled episode by its recall strength to this power. A recall brings
-    # back nearly every stored episode (a cue touches most of them a little), so at power 1 the average is close to
-    # the store's mean; a high power keeps the episodes the cue matches best. Tuning seeds (sets of 24 objects
-    # 1000-1011 in 4 orders; lives of 64 objects 1000-1003), median novel-object error after 24 / after 64 objects:
-    # 0.25 / 0.14 at 8, 0.25 / 0.13 at 16, 0.26 / 0.22 at 32 (power 4 at 0.35 / 0.22)
-    recall_sharpness: float = 16.0
-    # how many of the recalled episodes (strongest first) the rules compare the present with; None: every one (the
-    # extended model). The paper compares with "the recalled past event": 1. On the tuning seeds above,
-    # comparing with every recalled episode gave errors 0.28 / 0.18 (at recall_sharpness 8, against 0.25 / 0.14 with
-    # the strongest alone) and ended with all four properties eliminated in 12 of 32 (set, order) (each episode is
-    # compared with ~all the store: every chance of a wrong Elimination)
-    compare_with: int | None = 1
-    seed: int = 0
-
-    @classmethod
-    def paper(cls, **kw) -> "AgentConfig":
-        """The paper's model: incremental rules, knowledge-gated recall, a weighted average of recalled rewards."""
-        return cls(**{"model": "paper", **kw})
-
-    @classmethod
-    def extended(cls, **kw) -> "AgentConfig":
-        """The extended model: evidence-set rules with contexts, and a readout fitted with the task's physics priors
-        (volume as fill x size^3, extensive properties as proportions, a sink-or-float boundary on the two fits)."""
-        return cls(**{"model": "extended", "compare_with": None, **kw})
-
-    @classmethod
-    def named(cls, model: str, **kw) -> "AgentConfig":
-        """`paper(**kw)` or `extended(**kw)` by name (MODELS). Use these rather than AgentConfig(model=...): a model
-        is more than that one field (the extended model compares with every recalled episode)."""
-        if model not in MODELS:
-            raise ValueError(f"unknown model {model!r} (known: {', '.join(MODELS)})")
-        return getattr(cls, model)(**kw)
-
-    def __post_init__(self):
-        if self.model not in MODELS:
-            raise ValueError(f"AgentConfig.model must be one of {', '.join(MODELS)}, got {self.model!r}")
-        self.ablate = tuple(dict.fromkeys(str(a) for a in self.ablate))
-        allowed = ABLATIONS[self.model]
-        if bad := [a for a in self.ablate if a not in allowed]:
-            raise ValueError(f"AgentConfig.ablate: {', '.join(map(repr, bad))} is no ablation of the {self.model} "
-                             f"model (it has: {', '.join(allowed)})")
-        if not self.recall_sharpness > 0:
-            raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
-        self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
-        if len(self.delta_p_band) != len(PROPERTIES) or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
-            raise ValueError(f"AgentConfig.delta_p_band needs {len(PROPERTIES)} (lo, hi) pairs with 0 <= lo <= hi, "
-                             f"got {self.delta_p_band}")
-
-    def to_dict(self) -> dict:
-        return asdict(self)
-
-    @classmethod
-    def from_dict(cls, d: dict) -> "AgentConfig":
-        parts = {"encoder": EncoderConfig, "hub": HubConfig, "memory": MemoryConfig, "rules": RulesConfig}
-        return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})
 
 
 @dataclass
@@ -326,15 +125,6 @@ class EpisodeStep:
         rank = torch.tensor([0, 3, 2, 1])[self.fired]          # S < U < G < E
         best = rank.max(dim=1).values
         return torch.tensor([STATUS_QUO, UNCERTAINTY, GROWTH, ELIMINATION])[best]
-
-
-def cannot_tell(unclear: torch.Tensor, contradicted: torch.Tensor, outcome_unclear: torch.Tensor) -> torch.Tensor:
-    """A comparison left out (the agent's and the batch answer's alike): the outcome in its dead zone, or a
-    contradiction that a property in its dead zone (unclear (..., P)) may have caused. Where the outcome held, such a
-    property did not change it: the properties that clearly changed still did nothing (generated sets of seeds
-    1000-1099: colour dominant in 0 sets instead of 12, when the felt mass of light colour twins fell in weight's dead
-    zone)."""
-    return (unclear.any(-1) & contradicted) | outcome_unclear
 
 
 def _check_words(phrase: str) -> None:
@@ -408,10 +198,7 @@ class Agent(nn.Module):
 
     def features(self, values: dict) -> torch.Tensor:
         """Decoded values -> (..., 6) readout features (FEATURE_COLUMNS): rgb, log fill, log size (cm), log mass (g)."""
-        e = self.config.encoder
-        size = values["size"][..., :1] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm)
-        mass = values["weight"][..., :1] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g)
-        return torch.cat([values["color"], values["shape"][..., :1].clamp_min(1e-3).log(), size, mass], -1)
+        return fitted_readout.readout_features(values, self.config.encoder)
 
     @torch.no_grad()
     def anticipate(self, measurement: dict) -> "Anticipation":
@@ -470,147 +257,23 @@ class Agent(nn.Module):
 
     def readout(self, x: torch.Tensor, xk: torch.Tensor, rewards: torch.Tensor, fates: torch.Tensor,
                 weight: torch.Tensor) -> torch.Tensor:
-        """The expected displacement (B,) of objects with features x (B, F) from recalled episodes with features
-        xk (B, K, F), rewards (B, K) cm^3, fates (B, K) and weights (B, K) (0 for an invalid recall); NaN where
-        nothing was recalled. See the module docstring."""
-        return self.expected_of(*self.readout_by_fate(x, xk, rewards, fates, weight))
+        """fitted_readout.readout with this agent's config and rules."""
+        return fitted_readout.readout(x, xk, rewards, fates, weight, self.config, self.rules)
 
     @staticmethod
     def expected_of(by_fate: torch.Tensor, p_sink: torch.Tensor) -> torch.Tensor:
-        """(B,) the displacement of the likelier fate where both have a fit, else of the one that has (NaN: none)."""
-        have = ~torch.isnan(by_fate)
-        chosen = by_fate.gather(1, (p_sink > 0.5).long()[:, None])[:, 0]
-        single = torch.nan_to_num(by_fate, nan=float("inf")).amin(-1)           # the one context with a fit
-        out = torch.where(have.all(-1), chosen, single)
-        return torch.where(have.any(-1), out, torch.full_like(out, float("nan")))
+        """fitted_readout.expected_of: the displacement of the likelier fate (NaN where neither has a fit)."""
+        return fitted_readout.expected_of(by_fate, p_sink)
 
     def readout_by_fate(self, x: torch.Tensor, xk: torch.Tensor, rewards: torch.Tensor, fates: torch.Tensor,
                         weight: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """`readout`'s parts: (B, 2) the displacement each fate's fit reads at the object (floats, sinks; NaN where
-        no recalled episode had that fate) and (B,) the probability that it sinks."""
-        B, K, F = xk.shape
-        dtype = x.dtype
-        # in float64: fits on a few episodes whose properties move together are ill-conditioned, and float32
-        # rounding (which differs with the batch an agent is computed in) would move the answer by percents
-        x, xk, weight = x.double(), torch.nan_to_num(xk).double(), (weight * ~torch.isnan(rewards)).double()
-        y = torch.nan_to_num(rewards, nan=1.0).clamp_min(1e-3).double().log()
-        # each context follows every property it has not eliminated itself, its dominant ones among them, and its
-        # rewards pick among them (below): the rules say which properties may matter, the rewards which one does.
-        # Following only the dominant ones where a context has any read floaters by their size where a confounded
-        # comparison had made size dominant for them and not weight (median novel-object error after 8 / 24
-        # episodes 4.1 / 3.2 % that way, 3.6 / 2.8 %; tuning seeds 1000-1099 / 1000-1029). Leaving out a property
-        # known irrelevant (eliminated in some context) as well left sinkers without size for a while on tuning seed
-        # 1006: size eliminated for floaters, colour dominant for sinkers by a confound, 11-14 % errors from 24 to 32
-        # objects; per context alone: error after 8 episodes 3.6 -> 3.1 % (1000-1099), after 16 / 32 objects of a
-        # long life 3.7 / 2.8 -> 3.5 / 2.6 % (1000-1009), after 24 episodes 2.8 % either way (1000-1029)
-        follow = self.rules.dominant[:, :2] | ~self.rules.eliminated[:, :2]       # (B, 2, P)
-        # candidate fits per context: each followed property alone, and all of them together (the last). An
-        # extensive property alone is a proportion: its column enters with slope 1 (an offset), only the intercept
-        # is fitted (EXTENSIVE; error after 8 episodes 9.4 % with a free slope, 4.4 % as a proportion)
-        P = follow.shape[-1]
-        alone = torch.eye(P, dtype=torch.bool).expand(B, 2, P, P) & follow[..., None, :]
-        reads = torch.cat([alone, follow[..., None, :]], 2)                       # (B, 2, P + 1, P) what each reads
-        proportion = torch.zeros(P + 1, F, dtype=x.dtype)                        # candidate -> its offset column
-        vol = self._as_volume
-        for name, col in EXTENSIVE.items() if self._prior else ():
-            alone = alone & ~torch.eye(P, dtype=torch.bool)[PROPERTIES.index(name)]
-            proportion[PROPERTIES.index(name), col] = 1.0
-        cand = torch.cat([alone, follow[..., None, :]], 2)                        # (B, 2, P + 1, P) its free slopes
-        centred = xk[:, None] - x[:, None, None]                                  # (B, 1, K, F)
-        xv, cols = vol(centred[:, :, None], feature_columns(cand)[..., None, :])
-        offset = torch.einsum("bkf,nf->bnk", vol(centred[:, 0], cols[:, 0, 0, 0])[0], proportion)[:, None]
-        yc = y[:, None, None] - offset                                            # (B, 1, P + 1, K)
-        d = xv * cols                                                             # (B, 2, P + 1, K, F) centred
-        A = torch.cat([torch.ones(*d.shape[:-1], 1, dtype=d.dtype), d], -1)      # (B, 2, P + 1, K, 1 + F)
-        # a fit that reads the mass weighs each episode by how well its mass was felt (readout_rel_precision);
-        # the others by recall strength alone (a light object's volume is as well known as a heavy one's)
-        mass2 = (2.0 * xk[..., _WEIGHT]).exp()                                    # (B, K) felt mass^2, g^2
-        felt = mass2 / (mass2 + (self.config.felt_mass_noise_g / self.config.readout_rel_precision) ** 2)
-        ctx = torch.arange(2)[None, :, None]
-        in_fate = weight[:, None] * ((fates[:, None] == ctx) | (fates[:, None] < 0))   # unseen fates count in both
-        w = in_fate[:, :, None] * torch.where(reads[..., PROPERTIES.index("weight"), None], felt[:, None, None], 1.0)
-        total = in_fate.sum(-1)                                                   # (B, 2)
-        tot_c = w.sum(-1)                                                         # (B, 2, P + 1)
-        ridge = torch.eye(1 + F, dtype=d.dtype) * self.config.readout_ridge
-        ridge[0, 0] = 0.0
-
-        def solve(w, tot_c):
-            lhs = torch.einsum("bcnkf,bcnk,bcnkg->bcnfg", A, w, A) + ridge * tot_c[..., None, None].clamp_min(1e-12)
-            lhs = lhs + torch.eye(1 + F, dtype=d.dtype) * 1e-12                   # an empty context stays solvable
-            beta = torch.linalg.solve(lhs, torch.einsum("bcnkf,bcnk,bcnk->bcnf", A, w, yc.expand(B, 2, -1, -1)))
-            return lhs, beta, torch.einsum("bcnkf,bcnf->bcnk", A, beta) - yc     # residuals (B, 2, P + 1, K)
-
-        res = solve(w, tot_c)[2]
-        w_plain = w
-        for _ in range(2):   # Huber: an episode far off its fit counts less (readout_huber), refitted twice
-            w = w_plain * (self.config.readout_huber / res.abs().clamp_min(1e-12)).clamp(max=1.0)
-            tot_c = w.sum(-1)
-            lhs, beta, res = solve(w, tot_c)
-        # the candidate that predicts the recalled rewards best when each is left out of its own fit (weighted
-        # leave-one-out residuals, res / (1 - leverage): a slope is paid for in what it fails to predict), among
-        # those with more episodes than parameters; all properties together only where no single one can be fitted
-        # (a fit on properties that moved together extrapolates wildly off their line). Error after 8 episodes
-        # 4.7 % choosing by residual variance per degree of freedom, 4.5 % this way (before the mass weights)
-        leverage = torch.einsum("bcnkf,bcnfg,bcnkg->bcnk", A, torch.linalg.inv(lhs), A) * w
-        loo = (w * (res / (1.0 - leverage).clamp_min(1e-9)) ** 2).sum(-1) / tot_c.clamp_min(1e-12)
-        n = (in_fate > 0).sum(-1, keepdim=True)                                   # (B, 2, 1) episodes per fate
-        dof = 1 + cols[..., 0, :].sum(-1)                                         # (B, 2, P + 1)
-        ok = (n > dof) & torch.cat([follow, torch.zeros_like(follow[..., :1])], -1)
-        score = torch.where(ok, loo, torch.full_like(loo, float("inf")))
-        pick = torch.where(ok.any(-1), score.argmin(-1), torch.full_like(score[..., 0], P, dtype=torch.long))
-        pred = beta[..., 0].gather(-1, pick[..., None])[..., 0]                   # (B, 2) log cm^3
-        pred = torch.where(total > 0, pred, torch.full_like(total, float("nan")))
-        fitted = y[:, None, None] + res                                           # each fit at each episode
-        return pred.exp().to(dtype), self._fate(x, xk, fitted, pick, ok.any(-1), pred, fates, weight).to(dtype)
-
-    @property
-    def _prior(self) -> bool:
-        """The extended readout's physics priors are on (the "prior" ablation takes them out)."""
-        return "prior" not in self.config.ablate
-
-    def _as_volume(self, features: torch.Tensor, columns: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
-        """`as_volume` with the prior on; size stays a length, shape a column of its own, without it."""
-        return as_volume(features, columns) if self._prior else (features, columns)
-
-    def _fate(self, x, xk, fitted, pick, chosen, pred, fates, weight) -> torch.Tensor:
-        """(B,) P(sinks) of the present object: which fit applies, learned from the recalled episodes' fates.
-        Where both fates have a fit their rewards chose, a logistic boundary over one feature: how much more an
-        object would displace floating than sinking by the two fits (their log ratio at each recalled episode,
-        relative to the present object's). An object that would displace more floating than the room it fills
-        sinks, and the recalled fates say where and how sharply. Elsewhere (a fate with too few episodes to choose
-        a fit, or one fate seen) a logistic boundary over the properties not known irrelevant, size and shape as
-        the volume (heavy for the room it fills sinks). Error after 8 episodes 4.4 % over the properties, 4.1 %
-        over the fits (tuning seeds 1000-1099)."""
-        B, K = fates.shape
-        dv, cv = self._as_volume(xk - x[:, None], feature_columns(self.rules.state != IRRELEVANT))
-        at = fitted.gather(2, pick[..., None, None].expand(B, 2, 1, K))[:, :, 0]  # (B, 2, K) each fit at each episode
-        z = (at[:, 0] - at[:, 1]) - (pred[:, 0] - pred[:, 1])[:, None]            # (B, K), 0 at the present object
-        both = chosen.all(-1) & ~torch.isnan(pred).any(-1) & self._prior         # (B,) read over the fits
-        # one regression for all agents, each over its own columns: the fits' feature in column 0, or the properties
-        by_fits = torch.zeros_like(cv)
-        by_fits[:, 0] = True
-        d = torch.where(both[:, None, None], torch.nan_to_num(z)[..., None] * by_fits[:, None], dv)
-        return self._will_sink(torch.where(both[:, None], by_fits, cv), d, fates, weight)
+        """fitted_readout.readout_by_fate with this agent's config and rules: (B, 2) by fate, (B,) P(sinks)."""
+        return fitted_readout.readout_by_fate(x, xk, rewards, fates, weight, self.config, self.rules)
 
     def _will_sink(self, cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: torch.Tensor,
                    steps: int = 12) -> torch.Tensor:
-        """P(sinks) of the present object: logistic regression of the recalled episodes' fates (B, K) on their
-        features relative to the present object's, d (B, K, F), over the feature columns `cols` (B, F); every
-        recalled episode counts once (a boundary needs its far examples as much as its near ones), Newton steps with
-        a small ridge (the classes are often separable). Its intercept is the log-odds at the present object."""
-        B, K, F = d.shape
-        A = torch.cat([torch.ones(B, K, 1, dtype=d.dtype), d * cols[:, None]], -1)  # (B, K, 1 + F)
-        w = (weight > 0) * (fates >= 0)
-        y = (fates == 1).to(d.dtype)
-        ridge = torch.eye(1 + F, dtype=d.dtype) * self.config.fate_ridge
-        ridge[0, 0] = 1e-6
-        beta = torch.zeros(B, 1 + F, dtype=d.dtype)
-        for _ in range(steps):
-            prob = torch.sigmoid(torch.einsum("bkf,bf->bk", A, beta))
-            grad = torch.einsum("bkf,bk->bf", A, w * (y - prob)) - beta @ ridge
-            hess = torch.einsum("bkf,bk,bkg->bfg", A, w * prob * (1 - prob), A) + ridge
-            beta = beta + torch.linalg.solve(hess, grad[..., None])[..., 0]
-        return torch.sigmoid(beta[:, 0])
+        """fitted_readout.will_sink with this agent's fate_ridge."""
+        return fitted_readout.will_sink(cols, d, fates, weight, self.config.fate_ridge, steps)
 
     def name_match(self, word_acts: torch.Tensor) -> torch.Tensor:
         """(B, U_word) word map activity -> (B, max_assemblies) how well it matches the name stored with each
@@ -695,29 +358,8 @@ class Agent(nn.Module):
 
     def delta_property(self, values: dict, recalled: dict, strength: torch.Tensor | None = None
                        ) -> tuple[torch.Tensor, torch.Tensor]:
-        """DeltaProperty: does a property's decoded bottom-up value (values[p]: (B, dim)) differ from the value each
-        recalled episode retro-activates (recalled[p]: (B, K, dim))? Returns (changed, unclear), both (B, K, P)
-        bool: changed beyond the property's band, or inside it (AgentConfig.delta_p_band). strength (B, K, P): the
-        pathway's strength for each comparison (default 1); at or below `retro_floor` the pathway retro-activates
-        nothing, so there is nothing to differ from (neither changed nor unclear)."""
-        x, xk = self.features(values)[:, None], self.features(recalled)
-        gaps = {"color": (values["color"][:, None] - recalled["color"]).norm(dim=-1),
-                "shape": (values["shape"][:, None] - recalled["shape"]).norm(dim=-1),
-                "size": (x[..., 4] - xk[..., 4]).abs(), "weight": (x[..., 5] - xk[..., 5]).abs()}
-        noise = 3.0 * self.config.felt_mass_noise_g / torch.minimum(x[..., 5], xk[..., 5]).exp()
-        changed, unclear = [], []
-        for i, p in enumerate(PROPERTIES):
-            lo, hi = self.config.delta_p_band[i]
-            if p == "weight":
-                lo, hi = lo + noise / 3, hi + noise   # unchanged within 1 sigma of the felt mass, changed beyond 3
-            gap = torch.nan_to_num(gaps[p], nan=0.0)
-            changed.append(gap > hi)
-            unclear.append((gap > lo) & (gap <= hi))
-        changed, unclear = torch.stack(changed, -1), torch.stack(unclear, -1)
-        if strength is not None:
-            live = strength > self.config.retro_floor
-            changed, unclear = changed & live, unclear & live
-        return changed, unclear
+        """comparisons.delta_property with this agent's config: (changed, unclear), both (B, K, P) bool."""
+        return comparisons.delta_property(values, recalled, self.config, strength)
 
     # -- one episode ------------------------------------------------------------------------------------------
     @torch.no_grad()
@@ -738,35 +380,9 @@ class Agent(nn.Module):
         fate = torch.full((B,), -1, dtype=torch.long) if sank is None else torch.as_tensor(sank).reshape(B).long()
         a = self.anticipate_acts(*(self.activities(measurement) if perceived is None else perceived))
         recall = a.recall
-        compared = recall.valid & learn[:, None]                                   # (B, K)
-        if self.config.compare_with is not None:
-            compared[:, self.config.compare_with:] = False
-        K = compared.shape[1]
-        context = context_of(fate[:, None].expand(B, K), a.fates)                  # (B, K)
-        # the outcome as the memory will hold it, against the outcomes it holds: both read through the reward code
-        stored = self.reward.stored(observed)[:, None]
-        delta_c = contradiction(stored, a.rewards, self.config.rules) & compared
-        unclear_c = outcome_unclear(stored, a.rewards, self.config.rules)
-        strength = self.hub.strength[:, :len(self.properties)]
-        P = self.rules.state.shape[1]
-        fired = torch.full((B, K, P), STATUS_QUO, dtype=self.rules.state.dtype, device=compared.device)
-        delta_p = torch.zeros(B, K, P, dtype=torch.bool, device=compared.device)
-        skipped = torch.zeros_like(compared)
-        # recalls come strongest first, the valid ones before the rest: past the most any agent compared with, a
-        # slot compares nothing and fires no rule (its comparisons are left out, not run; unbounded, K = the slots
-        # of a whole memory)
-        used = max(1, int(compared.sum(1).max()))
-        for k in range(used):
-            # each comparison sees the pathways as they are in its context, after the comparisons before it
-            gate = self.rules.context_strength()[torch.arange(B), context[:, k]]
-            dp, unclear = self.delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
-                                              gate[:, None])
-            use = compared[:, k] & ~cannot_tell(unclear[:, 0], delta_c[:, k], unclear_c[:, k])
-            delta_p[:, k] = dp = dp[:, 0] & use[:, None]
-            skipped[:, k] = compared[:, k] & ~use
-            if "rules" not in self.config.ablate:
-                fired[:, k] = self.rules.apply(dp, delta_c[:, k] & use, use, strength=strength,
-                                               context=context[:, k])
+        c = comparisons.compare(a, self.reward.stored(observed)[:, None], fate, learn, self.config, self.rules,
+                                self.hub.strength[:, :len(self.properties)])
+        delta_p, delta_c, unclear_c, skipped = c.delta_p, c.delta_c, c.unclear_c, c.skipped
         # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
         # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
         # tell, or a different object that happened to end the same
@@ -776,7 +392,7 @@ class Agent(nn.Module):
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
         self._name(a.acts, a.present, learn & (self.hub.n_assemblies == count))   # not if _encode just stored it
-        return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, fired, encoded)
+        return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, c.fired, encoded)
 
     @torch.no_grad()
     def remember(self, measurement: dict, observed_cm3: torch.Tensor, goal_before: torch.Tensor,
@@ -877,16 +493,8 @@ class Agent(nn.Module):
         cannot tell (the outcome in its dead zone, or a contradiction with a property in its dead zone) shows no
         change and no contradiction, as the agent leaves such a comparison out."""
         acts, _ = self.activities(measurement)
-        values = self.decode(acts)
         observed = self.reward.stored(torch.as_tensor(observed_cm3, dtype=torch.float32))
-        n = observed.shape[0]
-        dp, unclear = self.delta_property(values, {p: v[None].expand(n, n, -1) for p, v in values.items()})
-        dp, unclear = dp.transpose(0, 1), unclear.transpose(0, 1)                 # [i, j]: j against i
-        dc = contradiction(observed[None, :], observed[:, None], self.config.rules)
-        skip = cannot_tell(unclear, dc, outcome_unclear(observed[None, :], observed[:, None], self.config.rules))
-        fate = torch.as_tensor(sank).long()
-        context = context_of(fate[:, None].expand(n, n), fate[None, :].expand(n, n))
-        return dp & ~skip[..., None], dc & ~skip, context
+        return comparisons.pairwise(self.decode(acts), observed, sank, self.config)
 
     @torch.no_grad()
     def select(self, index) -> "Agent":

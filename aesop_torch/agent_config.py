@@ -1,0 +1,178 @@
+"""The agent's config (AgentConfig: the numbers the paper leaves open, each with its why) and the layout of its
+episodes on the memory sheet, which the config's defaults are sized to (docs/model.md)."""
+
+from __future__ import annotations
+
+from dataclasses import asdict, dataclass, field
+
+from .encoders import PROPERTIES, EncoderConfig
+from .hub import HubConfig
+from .memory import MemoryConfig
+from .rules import RulesConfig
+
+# Rows of an episode on the 20 x 50 memory sheet: one event per row, in time order, and the object hub's other
+# rows. ROW_REWARD holds the reward's coarse unit in the half of the object's fate (floated: units 0-24, sank:
+# 25-49); ROW_FATE_UNSEEN marks an episode whose fate was not seen (its reward then sits in the first half).
+(ROW_BODY_START, ROW_OBJECT, ROW_REACH, ROW_GRASP, ROW_DROP, ROW_REWARD, ROW_BODY_END, ROW_FATE_UNSEEN,
+ ROW_REWARD_FINE) = range(9)
+OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows of 50, 2 neurons of each per object
+AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
+
+MODELS = ("paper", "extended")
+ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}
+
+
+@dataclass
+class AgentConfig:
+    encoder: EncoderConfig = field(default_factory=EncoderConfig)
+    # the object hub spans the 12 rows the episode's events leave free (OBJECT_ROWS), 2 neurons of each per object:
+    # the memory's lifetime capacity for the agent's own episodes. Its other rows are shared by every episode (the
+    # same reach, grasp and drop) or take one of a few codes, so the object's code is what sets one episode apart;
+    # from one 5-neuron row, exact recall from the object cue held to ~32 episodes, from 12 2-neuron rows it holds
+    # to 230 (benches/memory_capacity.py). Sparse 2-of-50 rows are the memory's best case (random episodes: 275).
+    # A full hub refuses a new object (HubConfig.when_full, the library's default, kept here): a run is sized for its
+    # objects (train.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
+    # big for its agents. A longer life sets both when_full to "forget_oldest" or "forget_weakest" (Agent._encode:
+    # an object's assembly and its episodes leave together).
+    hub: HubConfig = field(default_factory=lambda: HubConfig(rows=len(OBJECT_ROWS), assembly_size=2))
+    # the sheet's rows as the agent uses them (OBJECT_ROWS cue the recall), and the reward's coarse and fine units
+    # each on a row of its own (k = 1: its inhibitory pool lets exactly one win, so a recalled reward is always
+    # one coarse and one fine unit; on one shared 2-of-50 row, recalling 16 episodes brought back two coarse units
+    # instead in 22 of 92 recalls). The fate shares the coarse row (a row of its own, floated or sank in every
+    # episode, outweighed the sparse rows in recall: 6 % of 230 episodes came back with the wrong fate)
+    # The hub's cue enters the sheet to the 16th power: a neuron coding for several objects fires for the
+    # best-matching one, so at 230 objects half the hub is driven at >= 0.5 by some partial match; to the 8th, 0.5
+    # clamps at 0.004 while the object's own assembly stays at 1 (exact recall of 230 generated objects from their
+    # cue: 0.4 % as given, 24 % squared, 94 % to the 4th, 99 % to the 8th, as from the exact stored code; tuning
+    # seeds 1000-1009); the 16th, with the symmetric match, kept the agent capacity at 230 on seeds 1000-1019.
+    # Two misses in a row end a recall (MemoryConfig.misses): with the first miss ending it, a novel cue's recall
+    # often stopped with its drive still strong, at a spurious or cycling state. Tuning seeds (`python
+    # benches/learning_curve.py --first-seed 1000`), after 64 / 128 / 230 objects: episodes recalled per probe
+    # cue 48 / 49 / 35 -> 54 / 62 / 78; probes more than 2 points above their senses' floor 14 / 17 / 32 -> 12 / 5 / 4
+    # of 320; error above the floor -0.17 / -0.07 / +0.08 -> -0.05 / -0.10 / -0.16 points (median error 2.11 /
+    # 2.32 / 2.11 -> 2.11 / 2.32 / 2.19 %, at the floor)
+    # No recall bound: a cue brings back every episode the network settles into (~76 of ~180 stored for a novel
+    # object after 230 objects, ~32 ending at the first miss; benches/learning_curve.py). A bound of 16 changed what
+    # a long life learns and predicts (tuning seeds 1000-1009, median novel-object error after 8 ... 230 objects:
+    # 3.8 3.7 2.7 3.4 2.3 1.8 % bounded at 16, 3.8 3.7 2.8 2.2 2.2 2.1 % unbounded), so it was part of the model, not
+    # a bound for speed
+    # A full memory refuses (MemoryConfig.when_full, the library's default, kept here for the hub's reason above)
+    memory: MemoryConfig = field(default_factory=lambda: MemoryConfig(row_k=AGENT_ROW_K, cue_rows=OBJECT_ROWS,
+                                                                      cue_power=16.0, misses=2, max_recalls=None))
+    rules: RulesConfig = field(default_factory=RulesConfig)
+    # the property maps are trained before the experiment on the infant's prior experience; 4000 samples cover
+    # the colour cube, the four shapes and the size and mass ranges densely enough for maps of <= 64 units.
+    som_samples: int = 4000
+    som_epochs: int = 30
+    # DeltaProperty, with a dead zone: a property changed when its decoded values differ by more than the upper
+    # bound, did not when by less than the lower, and a comparison with a property in between is left out (it
+    # cannot tell). Per property (color, shape, size, weight): colour as RGB distance; shape in [fill, extent
+    # ratios]; size and weight as |log ratio|. The bounds match the outcome's (RulesConfig): a size change above
+    # 8 % (26 % in volume) or a mass change above 25 % moves the displacement past the 20 % contradiction
+    # tolerance, one below 3 % (9 % in volume) or 5 % stays near the 5 % as-expected tolerance. Colour 0.15 and
+    # shape 0.1 are far above the camera's noise and below the gaps between named colours (>= 0.4) and between
+    # shape kinds (fill 1, 0.79, 0.52).
+    delta_p_band: tuple = ((0.08, 0.15), (0.08, 0.15), (0.03, 0.077), (0.049, 0.223))
+    # the wrist's noise on the felt mass (sim/world.py WorldConfig.mass_noise_g): a light object's weight is only
+    # called changed beyond 3 sigma of it (added to the weight bounds, as a relative difference of its mass)
+    felt_mass_noise_g: float = 1.0
+    # a readout fit that reads the mass weighs an episode by how well its mass was felt, m^2 / (m^2 + (noise /
+    # this)^2): the wrist's 1 g is 12 % of an 8 g floater, far more than the ~2 % the camera's volume is known to
+    # (three extents at ~0.7 % and the fill at ~0.9 %, sim.sensor_model), which sets the scale. Median novel-object
+    # error after 8 episodes 4.4 % unweighted, 4.1 % weighted; 4.4 % at 0.05 (tuning seeds 1000-1099)
+    readout_rel_precision: float = 0.02
+    # Huber's threshold on a readout fit's residuals (log units): an episode farther off its fit counts with weight
+    # threshold / |residual| (refitted twice). With hundreds of objects stored, a recall can bring back one object's
+    # reward with another's properties (tuning seed 1003, 230 objects: a 1000 g cylinder of 382 cm^3 came back with
+    # a 1000 g box's 470 cm^3), and a least-squares ratio follows it. 0.05 is 2.5x the ~2 % a volume is seen to.
+    # Median novel-object error after 230 objects 2.1 % least squares, 1.75 % with it (tuning seeds 1000-1009);
+    # after 8 / 24 episodes 3.6 / 2.8 % and 3.6 / 2.7 % (1000-1099 / 1000-1029)
+    readout_huber: float = 0.05
+    # a pathway at or below this strength retro-activates nothing (the paper: eliminated, "they no longer will
+    # retro-activate each other"): the rules' eliminated strength (0.05) is below it, an undecided pathway (never
+    # below RulesConfig.uncertain_floor, 0.5) above.
+    retro_floor: float = 0.1
+    # ridge of the readout's fit, relative to its total weight: enough to make a fit on one episode (or on episodes
+    # that share a value) flat instead of singular, too little to bend a fit on values that differ.
+    readout_ridge: float = 1e-5
+    # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
+    # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
+    fate_ridge: float = 1e-2
+    # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
+    # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
+    # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
+    # alike). True: the word map drives the cue like a property map (at its pathway strength, 1).
+    names_in_cue: bool = False
+    # `imagine`: the words must match a stored name at least this well (cosine of the word map's patterns, read
+    # over the assembly's neurons: an object's own name gives 1, a name with one more word than was said 0.82 (2 of
+    # 3 words), one with a word in place of another 0.67) to be taken as naming it; below, the answer is "no object
+    # I know", not a guess. So "blue cylinder" names the blue heavy cylinder and "light blue cube" no yellow cube.
+    imagine_floor: float = 0.75
+    # `hear_goal`: a phrase names the goal when it drives the goal state at least this much, i.e. holds both goal
+    # words (drive = the fraction of them heard): "reach" alone names nothing to reach, "the ball" no action on it
+    goal_floor: float = 0.75
+    # which model (MODELS): "paper", the paper's mechanism and nothing more (rules that edit the pathway strengths
+    # one firing at a time, incremental_rules.py; prediction the recall-strength-weighted average of the recalled
+    # rewards), or "extended" (rules over the evidence set with floating / sinking contexts, rules.py, and a readout
+    # fitted with priors of the task's physics: `readout_by_fate`). `AgentConfig.paper()` / `.extended()`.
+    model: str = "paper"
+    # parts switched off, for ablations (ABLATIONS): "rules" (no rule ever fires: the strengths stay at 1, the
+    # knowledge unknown), "gating" (the memory's cue ignores the strengths: knowledge no longer reaches recall),
+    # "prior" (extended only: the readout's fit without its physics priors: free slopes, size as a length, no volume
+    # feature, a fate boundary over the properties)
+    ablate: tuple = ()
+    # the paper model's readout weighs each recalled episode by its recall strength to this power. A recall brings
+    # back nearly every stored episode (a cue touches most of them a little), so at power 1 the average is close to
+    # the store's mean; a high power keeps the episodes the cue matches best. Tuning seeds (sets of 24 objects
+    # 1000-1011 in 4 orders; lives of 64 objects 1000-1003), median novel-object error after 24 / after 64 objects:
+    # 0.25 / 0.14 at 8, 0.25 / 0.13 at 16, 0.26 / 0.22 at 32 (power 4 at 0.35 / 0.22)
+    recall_sharpness: float = 16.0
+    # how many of the recalled episodes (strongest first) the rules compare the present with; None: every one (the
+    # extended model). The paper compares with "the recalled past event": 1. On the tuning seeds above,
+    # comparing with every recalled episode gave errors 0.28 / 0.18 (at recall_sharpness 8, against 0.25 / 0.14 with
+    # the strongest alone) and ended with all four properties eliminated in 12 of 32 (set, order) (each episode is
+    # compared with ~all the store: every chance of a wrong Elimination)
+    compare_with: int | None = 1
+    seed: int = 0
+
+    @classmethod
+    def paper(cls, **kw) -> "AgentConfig":
+        """The paper's model: incremental rules, knowledge-gated recall, a weighted average of recalled rewards."""
+        return cls(**{"model": "paper", **kw})
+
+    @classmethod
+    def extended(cls, **kw) -> "AgentConfig":
+        """The extended model: evidence-set rules with contexts, and a readout fitted with the task's physics priors
+        (volume as fill x size^3, extensive properties as proportions, a sink-or-float boundary on the two fits)."""
+        return cls(**{"model": "extended", "compare_with": None, **kw})
+
+    @classmethod
+    def named(cls, model: str, **kw) -> "AgentConfig":
+        """`paper(**kw)` or `extended(**kw)` by name (MODELS). Use these rather than AgentConfig(model=...): a model
+        is more than that one field (the extended model compares with every recalled episode)."""
+        if model not in MODELS:
+            raise ValueError(f"unknown model {model!r} (known: {', '.join(MODELS)})")
+        return getattr(cls, model)(**kw)
+
+    def __post_init__(self):
+        if self.model not in MODELS:
+            raise ValueError(f"AgentConfig.model must be one of {', '.join(MODELS)}, got {self.model!r}")
+        self.ablate = tuple(dict.fromkeys(str(a) for a in self.ablate))
+        allowed = ABLATIONS[self.model]
+        if bad := [a for a in self.ablate if a not in allowed]:
+            raise ValueError(f"AgentConfig.ablate: {', '.join(map(repr, bad))} is no ablation of the {self.model} "
+                             f"model (it has: {', '.join(allowed)})")
+        if not self.recall_sharpness > 0:
+            raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
+        self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
+        if len(self.delta_p_band) != len(PROPERTIES) or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
+            raise ValueError(f"AgentConfig.delta_p_band needs {len(PROPERTIES)} (lo, hi) pairs with 0 <= lo <= hi, "
+                             f"got {self.delta_p_band}")
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict) -> "AgentConfig":
+        parts = {"encoder": EncoderConfig, "hub": HubConfig, "memory": MemoryConfig, "rules": RulesConfig}
+        return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})
