@@ -44,6 +44,7 @@ MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill 
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
 LOCK_NAME = ".lock"
 CONFIG_NAME = "config.json"   # the run's config, written when it starts (summary.json's `config`)
+RUN_NAME = "run.json"         # the run's settings as given (objects, orders, physics, overrides): what --resume reads
 MODELS = ("paper", "extended")                                        # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
@@ -98,14 +99,16 @@ def parse_args(argv):
                 epilog=CONFIG_HELP)
     ap.add_argument("--objects", type=Path, default=None, metavar="FILE",
                     help="objects file: JSON, schema in CONTRACTS.md (default: sim/default_objects.json)")
-    ap.add_argument("--orders", type=orders_arg, default=DEFAULT_ORDERS, metavar="N|listed|all",
+    ap.add_argument("--orders", type=orders_arg, default=None, metavar="N|listed|all",
                     help=f"N random orders of the train objects (N <= {MAX_ORDERS:,}), 'listed' (the file's order) "
-                         f"or 'all' (every permutation: at most {MAX_ORDERS:,} orders, i.e. 9 objects)")
+                         f"or 'all' (every permutation: at most {MAX_ORDERS:,} orders, i.e. 9 objects) (default: "
+                         f"{DEFAULT_ORDERS})")
     ap.add_argument("--seed", type=seed_arg, default=None, metavar="S",
                     help="seed of the random orders, of the maps' developmental training and of the sensor noise: "
                          "same seed, same run (default: 0, or the config's seed)")
     ap.add_argument("--out", type=Path, default=None, metavar="DIR", help=f"output directory (default: {DEFAULT_OUT})")
-    ap.add_argument("--resume", action="store_true", help="continue the interrupted run in --out")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue the interrupted run in --out with its own settings (a flag given must agree)")
     ap.add_argument("--config", type=Path, default=None, metavar="FILE.toml",
                     help="the model's and the world's config as a TOML file: top-level keys are AgentConfig fields, "
                          "tables its parts ([rules], [memory], ...) and the world's ([world], [world.tank], ...)")
@@ -121,8 +124,9 @@ def parse_args(argv):
                     help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
                          "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
                          "physics priors)")
-    ap.add_argument("--physics", choices=("cached", "per-episode"), default="cached",
-                    help="simulate each distinct object once (cached) or every episode of every order")
+    ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
+                    help="simulate each distinct object once (cached) or every episode of every order (default: "
+                         "cached)")
     ap.add_argument("--frames", action="store_true", help="save camera frames of each simulated drop")
     ap.add_argument("--gui", action="store_true", help="pybullet GUI (needs a display)")
     a = ap.parse_args(argv)
@@ -133,9 +137,14 @@ def parse_args(argv):
     gather_config(a)
     if a.resume and a.out is None:
         raise UsageError("--resume needs --out DIR (the run to continue)")
+    a.stored_objects = None
+    if a.resume:
+        adopt_run(a)
+    a.orders = a.orders or DEFAULT_ORDERS
+    a.physics = a.physics or "cached"
     if a.out is None:
         a.out = Path("runs") / time.strftime("run-%Y%m%d-%H%M%S")
-    if a.objects is None:
+    if a.objects is None and a.stored_objects is None:
         a.objects = DEFAULT_OBJECTS
     return a
 
@@ -174,7 +183,14 @@ def gather_config(a) -> None:
     if a.seed is not None:
         put("seed", a.seed, "--seed")
     a.overrides, a.origins = overrides, origins
+    _run_level(a)
 
+
+def _run_level(a) -> None:
+    """a.model, a.ablate, a.seed from a.overrides, checked (torch-free)."""
+    from train.config import show
+
+    overrides, origins = a.overrides, a.origins
     model = overrides.get("model", "paper")
     if model not in MODELS:   # a flag's is checked by argparse; the file's and --set's here (before the first line)
         raise UsageError(f"{origins['model']}: model takes one of {', '.join(MODELS)}, got {show(model)}")
@@ -188,6 +204,70 @@ def gather_config(a) -> None:
     if not isinstance(seed, int) or isinstance(seed, bool) or not 0 <= seed < MAX_SEED:
         raise UsageError(f"{origins['seed']}: seed takes an integer from 0 to 2**63 - 1, got {show(seed)}")
     a.model, a.ablate, a.seed = model, list(dict.fromkeys(ablate)), seed
+
+
+def adopt_run(a) -> None:
+    """--resume: the run's own settings from DIR/run.json (written when it started), so that --resume --out DIR
+    alone continues it. A flag given must agree with them: one that contradicts one is refused, naming the stored
+    value. A run from before run.json: the flags as given (the checkpoint's check refuses a mismatch)."""
+    import json
+
+    from train.config import show
+
+    path = a.out / RUN_NAME
+    if path.is_symlink() or not path.is_file():
+        return
+    try:
+        run = json.loads(path.read_text())
+        stored, overrides = {k: run[k] for k in ("orders", "physics")}, run["overrides"]
+        if not isinstance(overrides, dict) or not isinstance(run["objects"], dict):
+            raise TypeError
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise UsageError(f"--resume: {path} is damaged ({type(e).__name__}); nothing was changed") from None
+    for flag, key in (("--orders", "orders"), ("--physics", "physics")):
+        given = getattr(a, key)
+        if given is not None and given != stored[key]:
+            raise UsageError(f"--resume: {flag} {given} contradicts the run's {key} {stored[key]}")
+        setattr(a, key, stored[key])
+    for key, value in a.overrides.items():
+        if key in overrides and overrides[key] != value:
+            origin = a.origins[key]
+            said = origin if origin.startswith("--set") else (f"{origin} {' '.join(value)}" if key == "ablate" and
+                                                               origin == "--ablate" else
+                                                               f"{origin} {value}" if origin.startswith("--") and
+                                                               not origin.startswith("--config") else
+                                                               f"{origin}: {key} = {show(value)}")
+            raise UsageError(f"--resume: {said} contradicts the run's {key} {show(overrides[key])}")
+    merged = {**overrides, **a.overrides}
+    a.origins = {**{k: f"the run's {k} ({path})" for k in overrides}, **a.origins}
+    a.overrides = merged
+    _run_level(a)
+    a.stored_objects = run["objects"]
+
+
+def run_settings(args, objects) -> dict:
+    """What DIR/run.json holds: the run's settings as --resume adopts them."""
+    return {"objects": objects.canonical(), "orders": args.orders, "physics": args.physics,
+            "overrides": {**args.overrides, "model": args.model, "ablate": args.ablate, "seed": args.seed}}
+
+
+def load_run_objects(args):
+    """The run's objects: --objects (checked against a resumed run's), else the resumed run's, else the default."""
+    from sim.objects import ObjectsFileError, parse_objects
+
+    stored = getattr(args, "stored_objects", None)
+    if stored is None:
+        return load_objects_or_fail(args.objects or DEFAULT_OBJECTS)
+    if args.objects is None:
+        try:
+            return parse_objects(stored)
+        except ObjectsFileError as e:
+            raise UsageError(f"--resume: the run's objects in {args.out / RUN_NAME}: {e}") from None
+    objects = load_objects_or_fail(args.objects)
+    if objects.canonical() != stored:
+        raise UsageError(f"--resume: --objects {args.objects} contradicts the run's objects (in "
+                         f"{args.out / RUN_NAME})")
+    return objects
 
 
 def resolve_config(args, objects):
@@ -270,12 +350,59 @@ def check_out(out: Path, resume: bool) -> None:
             raise UsageError(f"--out {out}: {p} is not a directory")
         if not os.access(p, os.W_OK | os.X_OK):
             raise UsageError(f"--out {out}: {p} is not writable")
-        if p == out and any(e.name != LOCK_NAME for e in os.scandir(out)):
+        if p == out and _holds_a_run(out):
             busy = _lock_holder(out)
             raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else
                              f"--out {out} already holds files; use --resume to continue it or another --out")
     if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
         raise UsageError(f"--out {out} is not writable")
+    if resume and (link := _link_inside(out)):
+        raise UsageError(f"--resume: {link} is a symbolic link; the run writes only inside --out {out}: remove it")
+
+
+WRITTEN = ("tb", "checkpoints", "frames", CONFIG_NAME, RUN_NAME, "summary.json", "figure2.png")   # what a run writes
+
+
+def _link_inside(out: Path) -> Path | None:
+    """The first symbolic link among what the run writes in --out (a link would send its writes elsewhere)."""
+    for name in WRITTEN:
+        top = out / name
+        if top.is_symlink():
+            return top
+        if top.is_dir():
+            for root, dirs, files in os.walk(top):   # does not follow links
+                for n in dirs + files:
+                    if (Path(root) / n).is_symlink():
+                        return Path(root) / n
+    return None
+
+
+def _leftover(out: Path, entry) -> bool:
+    """What a run killed before its first checkpoint leaves: its config.json, run.json and checkpoint temp files."""
+    if entry.name == LOCK_NAME:   # whatever it is, lock_out judges it
+        return True
+    if entry.name in (CONFIG_NAME, RUN_NAME) and entry.is_file(follow_symlinks=False):
+        return True
+    if entry.name == "checkpoints" and entry.is_dir(follow_symlinks=False):
+        return all(re.fullmatch(r"latest\.pt\..+\.tmp", e.name) and e.is_file(follow_symlinks=False)
+                   for e in os.scandir(entry.path))
+    return False
+
+
+def _holds_a_run(out: Path) -> bool:
+    """Whether --out holds more than the lock and the leftovers of a run killed before its first checkpoint."""
+    return not all(_leftover(out, e) for e in os.scandir(out))
+
+
+def _remove_leftovers(out: Path) -> None:
+    """A fresh run into the --out of one killed before its first checkpoint: its leftovers go (the lock stays)."""
+    for e in list(os.scandir(out)):
+        if e.name == "checkpoints":
+            for f in os.scandir(e.path):
+                os.unlink(f.path)
+            os.rmdir(e.path)
+        elif e.name != LOCK_NAME:
+            os.unlink(e.path)
 
 
 def _lock_holder(out: Path) -> str | None:
@@ -351,8 +478,9 @@ def prepare(args, objects, n_orders: int, physics=None):
     try:
         if args.resume:
             return resume_experiment(args, objects), True, lock
-        if any(e.name != LOCK_NAME for e in os.scandir(args.out)):   # filled since check_out: another run's
+        if _holds_a_run(args.out):   # filled since check_out: another run's
             raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
+        _remove_leftovers(args.out)
         # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
         orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
         if physics is not None:
@@ -469,7 +597,7 @@ def main(argv=None) -> int:
     try:
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
-            objects = load_objects_or_fail(args.objects)
+            objects = load_run_objects(args)
             n_orders = count_orders(len(objects.train), args.orders)
             check_out(args.out, args.resume)
             # the first line: everything checkable without torch is checked; torch's import takes the next second
@@ -604,6 +732,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
 
     if not resumed:
         write_config(config, out / CONFIG_NAME)   # what --resume compares; before the first checkpoint
+        write_text_atomic(json.dumps(run_settings(args, objects), indent=1) + "\n", out / RUN_NAME)
         checkpoint()  # from here on the run can be resumed, even if it is killed during the first simulations
     physics = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui, **world_kw(args))   # main() made it
     _OPEN["physics"] = physics
