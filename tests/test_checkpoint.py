@@ -263,9 +263,9 @@ def test_full_disk_ends_in_one_line_and_resume_is_exact(paper_file, whole, tmp_p
     out = tmp_path / "full"
     real, calls = ck._write_bytes, []
 
-    def full_after_three(f, data):   # the 5th atomic write (config.json, then the checkpoint at the start, after the
-        calls.append(1)               # simulations, after episode 1, after episode 2) finds the disk full
-        if len(calls) == 5:
+    def full_after_three(f, data):   # the 6th atomic write (config.json, run.json, then the checkpoint at the start,
+        calls.append(1)               # after the simulations, after episode 1, after episode 2) finds the disk full
+        if len(calls) == 6:
             raise OSError(errno.ENOSPC, "No space left on device", f.name)
         real(f, data)
 
