@@ -51,7 +51,7 @@ from . import comparisons, fitted_readout
 from .agent_config import (ABLATIONS, AGENT_ROW_K, MODELS, OBJECT_ROWS, ROW_BODY_END, ROW_BODY_START, ROW_DROP,
                            ROW_FATE_UNSEEN, ROW_GRASP, ROW_OBJECT, ROW_REACH, ROW_REWARD, ROW_REWARD_FINE, AgentConfig)
 from .comparisons import cannot_tell
-from .encoders import (FUNCTION_WORDS, GOAL_WORDS, PROPERTIES, VOCABULARY, WORD_MAP, SensoryEncoder,
+from .encoders import (FUNCTION_WORDS, GOAL_WORDS, VOCABULARY, WORD_MAP, SensoryEncoder,
                        default_map_configs, encode_words, train_property_maps, unknown_words, word_activity)
 from .fitted_readout import EXTENSIVE, FEATURE_COLUMNS, as_volume, feature_columns
 from .hub import ActionHub, BodyHub, ObjectHub, RewardCode, _relative
@@ -143,12 +143,17 @@ class Agent(nn.Module):
         self.config = config = config or AgentConfig()
         self.batch = batch
         self.encoder = SensoryEncoder(config.encoder)
+        # the maps of config.encoder: the default's are the paper's four and the word map; each context property
+        # (EncoderConfig.context) adds one, developed after them (their samples are drawn last, so the others'
+        # maps are the same with or without context)
         if develop:
             g = torch.Generator().manual_seed(config.seed)
-            self.maps = train_property_maps(config.som_samples, g, epochs=config.som_epochs)
+            self.maps = train_property_maps(config.som_samples, g, epochs=config.som_epochs, config=config.encoder)
         else:
-            self.maps = nn.ModuleDict({name: SelfOrganizingMap(cfg) for name, cfg in default_map_configs().items()})
-        self.properties = PROPERTIES
+            self.maps = nn.ModuleDict({name: SelfOrganizingMap(cfg)
+                                       for name, cfg in default_map_configs(config.encoder).items()})
+        # the properties the rules judge: the object's, then the context's (AgentConfig.properties)
+        self.properties = config.properties
         self.hub = ObjectHub({name: m.weights.shape[0] for name, m in self.maps.items()}, config.hub, batch=batch)
         self.memory = EpisodicMemory(config.memory, batch=batch)
         self.rules = self._new_rules(batch)
@@ -156,9 +161,25 @@ class Agent(nn.Module):
 
     def _new_rules(self, batch: int) -> nn.Module:
         if self.config.model == "paper":
-            return IncrementalRules(self.config.rules, batch=batch, properties=PROPERTIES,
+            return IncrementalRules(self.config.rules, batch=batch, properties=self.properties,
                                     retro_floor=self.config.retro_floor)
-        return CausalRules(self.config.rules, batch=batch, properties=PROPERTIES)
+        return CausalRules(self.config.rules, batch=batch, properties=self.properties)
+
+    def _judged(self) -> list[int]:
+        """The judged properties' maps, in `properties` order: their indices into the maps (and the hub's
+        pathway strengths). The default's are 0-3 (the word map, 4, is not judged); context maps come after it."""
+        names = list(self.maps)
+        missing = [p for p in self.properties if p not in names]
+        if missing:
+            raise ValueError(f"no map for the judged properties {missing} (maps: {names})")
+        return [names.index(p) for p in self.properties]
+
+    def judged_strength(self) -> torch.Tensor:
+        """(B, P) the judged properties' pathway strengths (a copy; `_set_judged_strength` writes them back)."""
+        return self.hub.strength[:, self._judged()]
+
+    def _set_judged_strength(self, strength: torch.Tensor) -> None:
+        self.hub.strength[:, self._judged()] = strength
 
     # -- perception -------------------------------------------------------------------------------------------
     def activities(self, measurement: dict) -> tuple[torch.Tensor, torch.Tensor]:
@@ -189,7 +210,7 @@ class Agent(nn.Module):
     def decode(self, acts: torch.Tensor) -> dict:
         """(..., P_all, U) map activities -> {property: (..., dim) population-decoded value in the map's input}."""
         return {name: self.maps[name].decode(acts[..., i, :self.maps[name].n_units])
-                for i, name in enumerate(self.maps) if name in PROPERTIES}
+                for i, name in enumerate(self.maps) if name in self.properties}
 
     def retro_activate(self, assemblies: torch.Tensor) -> torch.Tensor:
         """(B, K, N) hub assemblies -> (B, K, P_all, U) the map activity each retro-activates at full strength
@@ -380,8 +401,10 @@ class Agent(nn.Module):
         fate = torch.full((B,), -1, dtype=torch.long) if sank is None else torch.as_tensor(sank).reshape(B).long()
         a = self.anticipate_acts(*(self.activities(measurement) if perceived is None else perceived))
         recall = a.recall
+        strength = self.judged_strength()     # the rules rewrite it, and the hub's pathways with it
         c = comparisons.compare(a, self.reward.stored(observed)[:, None], fate, learn, self.config, self.rules,
-                                self.hub.strength[:, :len(self.properties)])
+                                strength)
+        self._set_judged_strength(strength)
         delta_p, delta_c, unclear_c, skipped = c.delta_p, c.delta_c, c.unclear_c, c.skipped
         # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
         # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
@@ -424,10 +447,8 @@ class Agent(nn.Module):
             # hub's match alone cannot tell: a remeasured object scores 0.8-1.0 on its own assembly, two distinct
             # objects up to 0.999 (generated sets of 230, seeds 1000-1004), and distinct objects sharing an
             # assembly cannot be recalled apart
-            P = len(self.properties)
             recalled = self.decode(self.retro_activate(assembly[:, None].to(acts.dtype)))
-            changed, unclear = self.delta_property(self.decode(acts), recalled,
-                                                   self.hub.strength[:, None, :P])
+            changed, unclear = self.delta_property(self.decode(acts), recalled, self.judged_strength()[:, None])
             known &= ~(changed | unclear)[:, 0].any(-1)
         new = mask & ~known
         if (new & (self.hub.n_assemblies >= self.hub.config.max_assemblies)).any():

@@ -4,6 +4,7 @@ episodes on the memory sheet, which the config's defaults are sized to (docs/mod
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field
+from typing import ClassVar
 
 from .encoders import PROPERTIES, EncoderConfig
 from .hub import HubConfig
@@ -73,6 +74,11 @@ class AgentConfig:
     # shape 0.1 are far above the camera's noise and below the gaps between named colours (>= 0.4) and between
     # shape kinds (fill 1, 0.79, 0.52).
     delta_p_band: tuple = ((0.08, 0.15), (0.08, 0.15), (0.03, 0.077), (0.049, 0.223))
+    # the band of each context property (EncoderConfig.context: a 1-d value in 0..1 on a 1 x 20 map), appended to
+    # delta_p_band for each one the config does not give: unchanged within one unit's spacing (0.05, what the map
+    # resolves), changed beyond two (0.1). A class constant, not a field: a config without context serialises as
+    # before (summary.json, checkpoints).
+    CONTEXT_DELTA_BAND: ClassVar[tuple] = (0.05, 0.1)
     # the wrist's noise on the felt mass (sim/world.py WorldConfig.mass_noise_g): a light object's weight is only
     # called changed beyond 3 sigma of it (added to the weight bounds, as a relative difference of its mass)
     felt_mass_noise_g: float = 1.0
@@ -165,9 +171,18 @@ class AgentConfig:
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
-        if len(self.delta_p_band) != len(PROPERTIES) or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
-            raise ValueError(f"AgentConfig.delta_p_band needs {len(PROPERTIES)} (lo, hi) pairs with 0 <= lo <= hi, "
-                             f"got {self.delta_p_band}")
+        n = len(self.properties)
+        if len(self.delta_p_band) == len(PROPERTIES) < n:   # the context properties' bands, unless given
+            self.delta_p_band += (tuple(map(float, self.CONTEXT_DELTA_BAND)),) * (n - len(PROPERTIES))
+        if len(self.delta_p_band) != n or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
+            raise ValueError(f"AgentConfig.delta_p_band needs {n} (lo, hi) pairs with 0 <= lo <= hi (one per "
+                             f"property: {', '.join(self.properties)}), got {self.delta_p_band}")
+
+    @property
+    def properties(self) -> tuple:
+        """The properties the rules judge: the object's (PROPERTIES), then the context's (EncoderConfig.context),
+        each perceived on a map of its own and compared between episodes alike."""
+        return PROPERTIES + tuple(self.encoder.context)
 
     def to_dict(self) -> dict:
         return asdict(self)

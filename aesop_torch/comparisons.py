@@ -14,7 +14,6 @@ from dataclasses import dataclass
 
 import torch
 
-from .encoders import PROPERTIES
 from .fitted_readout import readout_features
 from .rules import STATUS_QUO, context_of, contradiction, outcome_unclear
 
@@ -32,17 +31,20 @@ def delta_property(values: dict, recalled: dict, config, strength: torch.Tensor 
                    ) -> tuple[torch.Tensor, torch.Tensor]:
     """DeltaProperty: does a property's decoded bottom-up value (values[p]: (B, dim)) differ from the value each
     recalled episode retro-activates (recalled[p]: (B, K, dim))? Returns (changed, unclear), both (B, K, P)
-    bool: changed beyond the property's band, or inside it (config: the AgentConfig, its delta_p_band, felt mass
-    noise and retro_floor). strength (B, K, P): the
+    bool, P the judged properties (AgentConfig.properties: the object's, then the context's, each as far as its
+    decoded value moved): changed beyond the property's band, or inside it (config: the AgentConfig, its
+    delta_p_band, felt mass noise and retro_floor). strength (B, K, P): the
     pathway's strength for each comparison (default 1); at or below `retro_floor` the pathway retro-activates
     nothing, so there is nothing to differ from (neither changed nor unclear)."""
     x, xk = readout_features(values, config.encoder)[:, None], readout_features(recalled, config.encoder)
     gaps = {"color": (values["color"][:, None] - recalled["color"]).norm(dim=-1),
             "shape": (values["shape"][:, None] - recalled["shape"]).norm(dim=-1),
             "size": (x[..., 4] - xk[..., 4]).abs(), "weight": (x[..., 5] - xk[..., 5]).abs()}
+    # a context property (EncoderConfig.context): its decoded value in 0..1, as its map reads it
+    gaps.update({p: (values[p][:, None] - recalled[p]).norm(dim=-1) for p in config.encoder.context})
     noise = 3.0 * config.felt_mass_noise_g / torch.minimum(x[..., 5], xk[..., 5]).exp()
     changed, unclear = [], []
-    for i, p in enumerate(PROPERTIES):
+    for i, p in enumerate(config.properties):
         lo, hi = config.delta_p_band[i]
         if p == "weight":
             lo, hi = lo + noise / 3, hi + noise   # unchanged within 1 sigma of the felt mass, changed beyond 3

@@ -29,7 +29,13 @@ import torch
 from .encoders import PROPERTIES, EncoderConfig
 from .rules import IRRELEVANT
 
-# the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass
+# the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass. The
+# context's properties (EncoderConfig.context, e.g. an apparatus' tube), judged by the rules like these, get no
+# column: the fit's priors are an object's physics in water (a volume, extensive properties as proportions) and the
+# model has none for a tube's look, width or level. They reach the readout through recall instead, as in the paper
+# model: their pathway strengths gate the cue, so the recalled episodes (the fit's data and weights) follow a
+# context property the rules made dominant and ignore one they eliminated. A free slope per context value would be
+# a readout fitted to the task, beside what the rules know.
 FEATURE_COLUMNS = {"color": slice(0, 3), "shape": slice(3, 4), "size": slice(4, 5), "weight": slice(5, 6)}
 
 
@@ -114,7 +120,10 @@ def readout_by_fate(x: torch.Tensor, xk: torch.Tensor, rewards: torch.Tensor, fa
     # 1006: size eliminated for floaters, colour dominant for sinkers by a confound, 11-14 % errors from 24 to 32
     # objects; per context alone: error after 8 episodes 3.6 -> 3.1 % (1000-1099), after 16 / 32 objects of a
     # long life 3.7 / 2.8 -> 3.5 / 2.6 % (1000-1009), after 24 episodes 2.8 % either way (1000-1029)
-    follow = rules.dominant[:, :2] | ~rules.eliminated[:, :2]       # (B, 2, P)
+    # the object's properties only (rules judge the context's too, EncoderConfig.context: they act on the readout
+    # through recall, whose cue their pathway strengths gate, not as a fitted feature; see FEATURE_COLUMNS)
+    n_obj = len(PROPERTIES)
+    follow = rules.dominant[:, :2, :n_obj] | ~rules.eliminated[:, :2, :n_obj]       # (B, 2, P)
     # candidate fits per context: each followed property alone, and all of them together (the last). An
     # extensive property alone is a proportion: its column enters with slope 1 (an offset), only the intercept
     # is fitted (EXTENSIVE; error after 8 episodes 9.4 % with a free slope, 4.4 % as a proportion)
@@ -191,7 +200,7 @@ def sink_probability(x, xk, fitted, pick, chosen, pred, fates, weight, config, r
     over the fits (tuning seeds 1000-1099)."""
     B, K = fates.shape
     prior = has_prior(config)
-    dv, cv = _as_volume(xk - x[:, None], feature_columns(rules.state != IRRELEVANT), prior)
+    dv, cv = _as_volume(xk - x[:, None], feature_columns(rules.state[:, :len(PROPERTIES)] != IRRELEVANT), prior)
     at = fitted.gather(2, pick[..., None, None].expand(B, 2, 1, K))[:, :, 0]  # (B, 2, K) each fit at each episode
     z = (at[:, 0] - at[:, 1]) - (pred[:, 0] - pred[:, 1])[:, None]            # (B, K), 0 at the present object
     both = chosen.all(-1) & ~torch.isnan(pred).any(-1) & prior                 # (B,) read over the fits

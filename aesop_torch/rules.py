@@ -294,13 +294,16 @@ class CausalRules(nn.Module):
 
 
 def batch_knowledge(delta_p: torch.Tensor, delta_c: torch.Tensor, context: torch.Tensor,
-                    config: RulesConfig | None = None) -> torch.Tensor:
+                    config: RulesConfig | None = None, properties: tuple | None = None) -> torch.Tensor:
     """The batch answer: the knowledge (P,) state codes the rules reach when every pair of a set's episodes is
     compared at once. delta_p (n, n, P) bool, delta_c (n, n) bool and context (n, n) long hold the comparison of
-    episode j with episode i at [i, j]; only i < j is read (a pair is compared once, at full strength)."""
+    episode j with episode i at [i, j]; only i < j is read (a pair is compared once, at full strength).
+    properties: the P judged properties' names (default the first P of PROPERTIES; AgentConfig.properties with
+    context)."""
     n = delta_c.shape[0]
     i, j = torch.triu_indices(n, n, offset=1)
-    rules = CausalRules(config, batch=len(i), properties=PROPERTIES[:delta_p.shape[-1]])
+    properties = PROPERTIES[:delta_p.shape[-1]] if properties is None else tuple(properties)
+    rules = CausalRules(config, batch=len(i), properties=properties)
     if len(i) == 0:
         return torch.zeros(delta_p.shape[-1], dtype=torch.long)
     rules.apply(delta_p[i, j], delta_c[i, j], torch.ones(len(i), dtype=torch.bool), context=context[i, j])

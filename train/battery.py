@@ -71,10 +71,10 @@ _MAPS: dict = {}
 
 
 def context_agent(config: AgentConfig, batch: int) -> Agent:
-    """An agent whose maps include the context maps of config.encoder.context (their hub branches too). The
-    agent develops its maps from the default encoder config, so they are developed here from the full one (same
-    seed: the property maps are bit-identical, the context maps' draws come after theirs) and shared between agents
-    of the same seed: maps never change after development."""
+    """An agent whose maps include the context maps of config.encoder.context (their hub branches too), and whose
+    rules judge them with the object's properties (AgentConfig.properties). The maps are developed as the Agent
+    develops them (from config.encoder, same seed: the property maps are bit-identical, the context maps' draws come
+    after theirs), once per seed, and shared between agents of the same seed: maps never change after development."""
     if not config.encoder.context:
         return Agent(config, batch=batch)
     agent = Agent(config, batch=batch, develop=False)
