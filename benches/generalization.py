@@ -26,6 +26,13 @@ sequential_equals_batch=F median_error_8=E median_error_24=E sets_order_independ
 `--record` writes the output into BENCHMARKS.md and the curves into benches/generalization.png; without it no
 tracked file is written.
 
+The agent runs as the sweep benches/generalization.toml runs it: each set is train/sweep.py's cell
+(`train.sweep.run_cell`: the set's seed draws the noise, the orders and the agent; all its orders one batched agent,
+the probes predicted after every episode) and its figures (the error curve, both agreements, the batch answers,
+colour and weight) are train/report.py's, so `python train/sweep.py benches/generalization.toml` then
+`python -m train.report` gives them digit for digit (the condition named --model), and at scale on a Ray cluster.
+The peers and the law-form reference are no sweep conditions: they run here on the same sets and orders.
+
 The model's numbers were chosen on sets of seeds 1000 and up; the default seeds here (0..) were never looked at
 while choosing them.
 """
@@ -34,11 +41,9 @@ from __future__ import annotations
 
 import argparse
 import math
-import statistics
 import sys
 import tempfile
 import time
-from collections import Counter
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -47,14 +52,13 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
-from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
-from aesop_torch.rules import batch_knowledge  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.population import knowledge_keys  # noqa: E402
 from train.progress import Step  # noqa: E402
+from train import sweep  # noqa: E402
+from train.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
@@ -141,39 +145,62 @@ def law_form(train_x: torch.Tensor, train_y: torch.Tensor, train_sank: torch.Ten
     return torch.stack(out, 1).float()
 
 
-def run_set(template: Agent, seed: int, n_train: int, n_orders: int, peers: bool = True) -> dict:
-    objs = parse_objects(generate(seed, n_train, 8, pairs=True))
+def world(seed: int, n_train: int, n_probe: int = 8):
+    """A generated set's world, as train/sweep.py's cell sees it (train.sweep.world_outcomes, closed_form): the train
+    objects' measurements and outcomes, the probes' measurements, truths and fates."""
+    objs = parse_objects(generate(seed, n_train, n_probe, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
     names, probe_names = [o.name for o in objs.train], [o.name for o in objs.probe]
-    orders = torch.tensor(draw_orders(len(names), str(n_orders), seed))
-    B = len(orders)
-    meas = stack_measurements([outcomes[n]["measurement"] for n in names])
-    observed = torch.tensor([outcomes[n]["observed_cm3"] for n in names])
-    sank = torch.tensor([outcomes[n]["sank"] for n in names])
-    before = torch.tensor([outcomes[n]["goal_before"] for n in names])
-    after = torch.tensor([outcomes[n]["goal_after"] for n in names])
-    pmeas = stack_measurements([probes[n]["measurement"] for n in probe_names])
-    truth = torch.tensor([probes[n]["archimedes_cm3"] for n in probe_names])
-    agent = template.select([0] * B)
-    errs = {"agent": [], "knn": [], "mlp": [], "law": []}
-    x_all, y_all, xq = raw_features(meas), observed.log(), raw_features(pmeas)
-    law_all, law_q = law_features(meas), law_features(pmeas)
-    probe_sinks = torch.tensor([o.sinks for o in objs.probe])
+    return {"meas": stack_measurements([outcomes[n]["measurement"] for n in names]),
+            "observed": torch.tensor([outcomes[n]["observed_cm3"] for n in names]),
+            "sank": torch.tensor([outcomes[n]["sank"] for n in names]),
+            "pmeas": stack_measurements([probes[n]["measurement"] for n in probe_names]),
+            "truth": torch.tensor([probes[n]["archimedes_cm3"] for n in probe_names]),
+            "probe_sinks": torch.tensor([o.sinks for o in objs.probe])}
+
+
+def peer_set(seed: int, n_train: int, n_orders: int) -> dict:
+    """The peers (kNN, MLP) and the law-form reference on one set, fed the episodes in the orders the set's cell
+    learns them (`draw_orders` from the set's seed): {who: (n_train, B) errors after each episode}."""
+    w = world(seed, n_train)
+    orders = torch.tensor(draw_orders(n_train, str(n_orders), seed))
+    x_all, y_all, xq = raw_features(w["meas"]), w["observed"].log(), raw_features(w["pmeas"])
+    law_all, law_q, truth = law_features(w["meas"]), law_features(w["pmeas"]), w["truth"]
+    errs = {"knn": [], "mlp": [], "law": []}
     for t in range(n_train):
-        obj = orders[:, t]
-        agent.step({k: v[obj] for k, v in meas.items()}, observed[obj], before[obj], after[obj], sank=sank[obj])
-        pred = torch.stack([agent.predict({k: v[i:i + 1].expand(B, *v.shape[1:]) for k, v in pmeas.items()})
-                            for i in range(len(probe_names))], 1)
-        errs["agent"].append(rel_errors(pred, truth))
-        if peers:
-            seen = orders[:, :t + 1]
-            tx, ty = x_all[seen], y_all[seen]
-            errs["knn"].append(rel_errors(knn(tx, ty, xq).exp(), truth))
-            errs["mlp"].append(rel_errors(mlp(tx, ty, xq, seed * 1000 + t).exp(), truth))
-            errs["law"].append(rel_errors(law_form(law_all[seen], ty, sank[seen], law_q, probe_sinks).exp(), truth))
-    batch = batch_knowledge(*template.pairwise_evidence(meas, observed, sank), template.config.rules)
-    return {"keys": knowledge_keys(agent.rules.state), "batch": knowledge_keys(batch[None])[0],
-            "errors": {k: torch.stack(v, 0) for k, v in errs.items() if v}}   # (n_train, B) each
+        seen = orders[:, :t + 1]
+        tx, ty = x_all[seen], y_all[seen]
+        errs["knn"].append(rel_errors(knn(tx, ty, xq).exp(), truth))
+        errs["mlp"].append(rel_errors(mlp(tx, ty, xq, seed * 1000 + t).exp(), truth))
+        errs["law"].append(rel_errors(law_form(law_all[seen], ty, w["sank"][seen], law_q, w["probe_sinks"]).exp(),
+                                      truth))
+    return {k: torch.stack(v, 0) for k, v in errs.items()}
+
+
+# the sweep file's set groups (benches/generalization.toml) of the bench's two kinds of set
+GROUPS = {8: "sets of 8", 24: "sets of 24"}
+
+
+def sweep_doc(model: str, sets: int, long_sets: int, orders: int, first_seed: int) -> dict:
+    """This run's agent and sets as a sweep file: at the defaults, benches/generalization.toml's cells of the
+    condition named --model."""
+    return {"world": "closed_form", "conditions": [{"name": model, "model": model}],
+            "sets": [{"name": GROUPS[n_train], "generate": {"seeds": [first_seed, first_seed + n_sets],
+                                                            "train": n_train, "probe": 8, "pairs": True},
+                      "orders": orders} for n_train, n_sets in ((8, sets), (24, long_sets))]}
+
+
+def agent_rows(doc: dict, bar=None):
+    """The rows (a pyarrow Table of train.sweep.schema()) of the sweep file `doc`: its cells run here, one after
+    another (`train.sweep.run_cell`); equal, row for row, to train/sweep.py on the same file."""
+    import pyarrow as pa
+    _, cells = sweep.resolve(doc, ROOT)
+    tables = []
+    for c in cells:
+        tables.append(sweep.run_cell(c["spec"], c["objects"]))
+        if bar is not None:
+            bar.update(1)
+    return pa.concat_tables(tables)
 
 
 def main():
@@ -192,55 +219,62 @@ def main():
     keep_freed_memory()   # freed tensors reused, for the peers in this process too (aesop_torch/malloc.py)
     torch.set_num_threads(1)
     t0 = time.perf_counter()
-    results = {}
+    # the agent: train/sweep.py's cells (benches/generalization.toml at the defaults), its figures train/report.py's
+    doc = sweep_doc(a.model, a.sets, a.long_sets, a.orders, a.first_seed)
+    with Step("cells", a.sets + a.long_sets, unit="cell", stream=sys.stderr) as bar:   # stderr: not recorded
+        rows = agent_rows(doc, bar)
+    s = summarise(rows)
+    peers = {}
     for n_train, n_sets in ((8, a.sets), (24, a.long_sets)):
-        cfg = AgentConfig.named(a.model)
-        cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
-        template = Agent(cfg, batch=1)
-        with Step(f"sets of {n_train}", n_sets, unit="set", stream=sys.stderr) as bar:   # stderr: not recorded
-            results[n_train] = []
+        with Step(f"sets of {n_train}", n_sets, unit="set", stream=sys.stderr) as bar:   # the peers
+            peers[n_train] = []
             for i in range(n_sets):
-                results[n_train].append(run_set(template, a.first_seed + i, n_train, a.orders))
+                peers[n_train].append(peer_set(a.first_seed + i, n_train, a.orders))
                 bar.update(1)
         print(f"{n_sets} sets of {n_train} train objects x {a.orders} orders: {time.perf_counter() - t0:.0f} s",
               flush=True)
 
-    def agreement(rs):
+    def agreement(n_train):
         """(sets whose final knowledge is the same in every order, (set, order) whose knowledge is the batch's)"""
-        return (sum(len(set(r["keys"])) == 1 for r in rs) / len(rs),
-                sum(k == r["batch"] for r in rs for k in r["keys"]) / sum(len(r["keys"]) for r in rs))
+        k = s["knowledge"][a.model, GROUPS[n_train]]
+        return k["order_agreement"], k["equals_batch"]
 
-    short = results[8]
-    (same, equal), (same_24, equal_24) = agreement(short), agreement(results[24])
-    finals = Counter(r["batch"] for r in short)
-    print(f"\nknowledge over {len(short)} sets of 8 (letters: colour shape size weight; U unknown, L likely "
+    short = s["knowledge"][a.model, GROUPS[8]]
+    (same, equal), (same_24, equal_24) = agreement(8), agreement(24)
+    print(f"\nknowledge over {short['cells']} sets of 8 (letters: colour shape size weight; U unknown, L likely "
           f"irrelevant, D dominant, I irrelevant)")
-    print(f"  same knowledge in every order:        {same:.3f} of sets ({same_24:.3f} of the sets of 24)")
+    print(f"  same knowledge in every order:        {_f3(same)} of sets ({_f3(same_24)} of the sets of 24)")
     print(f"  sequential equals the batch answer:   {equal:.3f} of (set, order) ({equal_24:.3f} for the sets of 24)")
-    print(f"  batch answers: " + ", ".join(f"{k} {v}" for k, v in finals.most_common()))
-    colour_irrelevant = sum(k[0] == "I" for r in short for k in r["keys"]) / sum(len(r["keys"]) for r in short)
-    weight_dominant = sum(k[3] == "D" for r in short for k in r["keys"]) / sum(len(r["keys"]) for r in short)
-    print(f"  colour irrelevant in {colour_irrelevant:.3f}, weight dominant in {weight_dominant:.3f} of (set, order)")
+    print(f"  batch answers: " + ", ".join(f"{k} {v}" for k, v in short["batch_answers"].items()))
+    print(f"  colour irrelevant in {short['colour_irrelevant']:.3f}, weight dominant in {short['weight_dominant']:.3f} "
+          f"of (set, order)")
 
     curves = {}
-    for n_train, rs in results.items():
-        curves[n_train] = {who: [float(torch.cat([r["errors"][who][t] for r in rs]).median()) for t in range(n_train)]
-                           for who in rs[0]["errors"]}
+    for n_train, rs in peers.items():
+        errs = s["errors"][a.model, GROUPS[n_train]]
+        curves[n_train] = {"agent": [errs[t + 1][1] for t in range(n_train)]}
+        curves[n_train].update({who: [float(torch.cat([r[who][t] for r in rs]).median()) for t in range(n_train)]
+                                for who in rs[0]})
     print("\nmedian novel-object error vs Archimedes (median over probes, then over (set, order))")
     print(f"{'episodes':>9} {'agent':>8} {'kNN':>8} {'MLP':>8}   {'law form':>8} (told the form and the fate)")
-    rows = [(8, t) for t in range(8)] + [(24, t) for t in (7, 15, 23)]
-    for n_train, t in rows:
+    table = [(8, t) for t in range(8)] + [(24, t) for t in (7, 15, 23)]
+    for n_train, t in table:
         c = curves[n_train]
         tag = f"{t + 1}" + (" (long)" if n_train == 24 else "")
         print(f"{tag:>9} {c['agent'][t]:>8.3f} {c['knn'][t]:>8.3f} {c['mlp'][t]:>8.3f}   {c['law'][t]:>8.3f}")
-    ahead = all(curves[n]["agent"][t] < min(curves[n]["knn"][t], curves[n]["mlp"][t]) for n, t in rows)
+    ahead = all(curves[n]["agent"][t] < min(curves[n]["knn"][t], curves[n]["mlp"][t]) for n, t in table)
     print(f"agent ahead of both peers at every episode count: {ahead}")
     _plot(curves, png)
     print(f"curves: {png.resolve().relative_to(ROOT) if png.resolve().is_relative_to(ROOT) else png}; "
           f"{time.perf_counter() - t0:.0f} s")
-    print(f"sets_order_independent={same:.3f} sequential_equals_batch={equal:.3f} "
+    print(f"sets_order_independent={_f3(same)} sequential_equals_batch={equal:.3f} "
           f"median_error_8={curves[8]['agent'][7]:.3f} median_error_24={curves[24]['agent'][23]:.3f} "
-          f"sets_order_independent_24={same_24:.3f} sequential_equals_batch_24={equal_24:.3f}")
+          f"sets_order_independent_24={_f3(same_24)} sequential_equals_batch_24={equal_24:.3f}")
+
+
+def _f3(x) -> str:
+    """A share to 3 places; 1.000 where every cell has one order (--orders 1: nothing to disagree)."""
+    return f"{1.0 if x is None else x:.3f}"
 
 
 def _plot(curves: dict, png: Path) -> None:

@@ -15,6 +15,12 @@ above it. And, since a median over sets can rise while most sets fall (or the re
 how many sets' errors fell and rose since the previous count, and the median over sets of that change. Last line:
 `median_error_8=E ... median_error_230=E`. `--record` writes the output into BENCHMARKS.md.
 
+The agent runs as the sweep benches/learning_curve.toml runs it: each life is train/sweep.py's cell
+(`train.sweep.run_cell`: the set's seed draws the noise, the order and the agent) and its figures (error, stored,
+recalled, the floor and the error over it, sets fell / rose) are train/report.py's, so `python train/sweep.py
+benches/learning_curve.toml` then `python -m train.report` gives them digit for digit (report.csv), and at scale on a
+Ray cluster. The peers are no sweep conditions: they run here on the same lives in the same order.
+
 The model's numbers were chosen on sets of seeds 1000 and up; the default seeds here (0..) were never looked at
 while choosing them.
 """
@@ -33,60 +39,60 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 import torch  # noqa: E402
 
-from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
-from generalization import knn, mlp, probe_errors, raw_features, rel_errors  # noqa: E402
+import pyarrow as pa  # noqa: E402
+
+from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
 from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
 from train.progress import Step  # noqa: E402
+from train import sweep  # noqa: E402
+from train.report import summarise  # noqa: E402
 from cli_args import at_least, count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
 CHECKS = (8, 16, 32, 64, 128, 230)
 
 
-def life(seed: int, n_train: int, bar, model: str = "extended") -> dict:
+def peers(seed: int, n_train: int, checks) -> dict:
+    """The generalization bench's two peers on one life, fed its episodes in the order its cell learns them (one
+    order drawn from the set's seed): {"knn", "mlp"}: {n: the median over probes of the error after n objects}."""
     objs = parse_objects(generate(seed, n_train, 16, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
     names = [o.name for o in objs.train]
     order = torch.tensor(draw_orders(len(names), "1", seed)[0])
     meas = stack_measurements([outcomes[names[i]]["measurement"] for i in order])
-    rec = [outcomes[names[i]] for i in order]
     pmeas = stack_measurements([probes[o.name]["measurement"] for o in objs.probe])
     truth = torch.tensor([probes[o.name]["archimedes_cm3"] for o in objs.probe])
-    cfg = AgentConfig.named(model)
-    cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
-    agent = Agent(cfg)
-    x_all, y_all = raw_features(meas), torch.tensor([r["observed_cm3"] for r in rec]).log()
+    x_all = raw_features(meas)
+    y_all = torch.tensor([outcomes[names[i]]["observed_cm3"] for i in order]).log()
     xq = raw_features(pmeas)
-    sensed = torch.minimum(pmeas["mass_g"], pmeas["fill"] * pmeas["extent_cm"].prod(-1))
-    floor = probe_errors(sensed, truth)       # each probe's error were it read by Archimedes from the senses
-    out = {"agent": {}, "knn": {}, "mlp": {}, "stored": {}, "recalled": {}, "excess": {}, "gross": {},
-           "floor": float(rel_errors(sensed[None], truth)[0])}
-    for t, r in enumerate(rec):
-        agent.step({k: v[t:t + 1] for k, v in meas.items()}, torch.tensor([r["observed_cm3"]]),
-                   torch.tensor([r["goal_before"]]), torch.tensor([r["goal_after"]]), sank=torch.tensor([r["sank"]]))
-        bar.update(1)
-        n = t + 1
-        if n not in CHECKS and n != n_train:
-            continue
-        probe = agent.select(torch.zeros(len(truth), dtype=torch.long)).anticipate(pmeas)   # a copy per probe
-        pred = probe.expected[None]
-        out["agent"][n] = float(rel_errors(pred, truth)[0])
-        excess = probe_errors(pred[0], truth) - floor
-        out["excess"][n], out["gross"][n] = float(excess.mean()), int((excess > 0.02).sum())
+    out = {"knn": {}, "mlp": {}}
+    for n in checks:
         out["knn"][n] = float(rel_errors(knn(x_all[None, :n], y_all[None, :n], xq).exp(), truth)[0])
         out["mlp"][n] = float(rel_errors(mlp(x_all[None, :n], y_all[None, :n], xq, seed * 1000 + n).exp(), truth)[0])
-        out["stored"][n] = int(agent.memory.count[0])
-        out["recalled"][n] = float(probe.recall.valid.sum(1).float().mean())
     return out
 
 
-def _moves(change: list[float]) -> str:
-    """Sets whose error fell / rose since the previous count, and the median of the change."""
-    fell, rose = sum(d < 0 for d in change), sum(d > 0 for d in change)
-    return f"{f'{fell}/{rose}':>15} {statistics.median(change):>+14.4f}"
+def sweep_doc(model: str, sets: int, objects: int, first_seed: int, checks) -> dict:
+    """This run's lives as a sweep file: at the defaults, benches/learning_curve.toml (with --model paper, the same
+    sets under a condition "paper")."""
+    return {"world": "closed_form", "conditions": [{"name": model, "model": model}],
+            "sets": [{"name": GROUP, "generate": {"seeds": [first_seed, first_seed + sets], "train": objects,
+                                                  "probe": 16, "pairs": True},
+                      "orders": 1, "checks": list(checks)}]}
+
+
+GROUP = "lives"   # benches/learning_curve.toml's set group
+
+
+def _moves(f: dict) -> str:
+    """Sets whose error fell / rose since the previous count, and the median of the change (train/report.py's)."""
+    if "fell" not in f:
+        return ""
+    moved = f"{f['fell']}/{f['rose']}"
+    return f"{moved:>15} {f['change']:>+14.4f}"
 
 
 def main():
@@ -101,30 +107,36 @@ def main():
     torch.set_num_threads(1)
     t0 = time.perf_counter()
     checks = [n for n in CHECKS if n < a.objects] + [a.objects]
-    lives = []
+    # the agent: train/sweep.py's cells (benches/learning_curve.toml at the defaults), its figures train/report.py's
+    _, cells = sweep.resolve(sweep_doc(a.model, a.sets, a.objects, a.first_seed, checks), ROOT)
+    tables, lives = [], []
     with Step("objects explored", a.sets * a.objects, unit="object", stream=sys.stderr) as bar:   # not recorded
-        for i in range(a.sets):
-            lives.append(life(a.first_seed + i, a.objects, bar, a.model))
-            print(f"set {a.first_seed + i}: agent " + " ".join(f"{n}:{lives[-1]['agent'][n]:.3f}" for n in checks),
-                  flush=True)
+        for c in cells:
+            tables.append(sweep.run_cell(c["spec"], c["objects"]))
+            lives.append(peers(c["spec"]["seed"], a.objects, checks))
+            bar.update(a.objects)
+            t = tables[-1]
+            err = dict(zip(t.column("episode").to_pylist(), t.column("probe_rel_error").to_pylist()))
+            print(f"set {c['spec']['seed']}: agent " + " ".join(f"{n}:{err[n]:.3f}" for n in checks), flush=True)
+    s = summarise(pa.concat_tables(tables))
+    errs, figs = s["errors"][a.model, GROUP], s["checks"][a.model, GROUP]
     print(f"\n{a.sets} sets of {a.objects} train + 16 probe objects, one order each: median over probes, then over "
           f"sets")
     print(f"{'explored':>9} {'agent':>8} {'kNN':>8} {'MLP':>8} {'stored':>7} {'recalled/cue':>13} "
           f"{'over floor':>11} {'probes >2 pts over':>19} {'sets fell/rose':>15} {'median change':>14}")
-    floor = statistics.median(lf["floor"] for lf in lives)
-    med = {who: {n: statistics.median(lf[who][n] for lf in lives) for n in checks}
-           for who in ("agent", "knn", "mlp", "stored", "recalled", "excess")}
-    for before, n in zip([None] + checks, checks):
-        moved = "" if before is None else _moves([lf["agent"][n] - lf["agent"][before] for lf in lives])
-        print(f"{n:>9} {med['agent'][n]:>8.4f} {med['knn'][n]:>8.3f} {med['mlp'][n]:>8.3f} "
-              f"{med['stored'][n]:>7.0f} {med['recalled'][n]:>13.1f} {med['excess'][n]:>+11.4f} "
-              f"{sum(lf['gross'][n] for lf in lives):>19} {moved}".rstrip())
+    floor = figs[checks[0]]["floor"]
+    med = {who: {n: statistics.median(lf[who][n] for lf in lives) for n in checks} for who in ("knn", "mlp")}
+    for n in checks:
+        f = figs[n]
+        print(f"{n:>9} {errs[n][1]:>8.4f} {med['knn'][n]:>8.3f} {med['mlp'][n]:>8.3f} "
+              f"{f['stored']:>7.0f} {f['recalled']:>13.1f} {f['over_floor']:>+11.4f} "
+              f"{f['over_2pts']:>19} {_moves(f)}".rstrip())
     print(f"the senses' floor (Archimedes on the measured probes): {floor:.4f}. over floor: a set's mean over its "
           f"probes of the agent's error less the probe's floor (median over sets); probes >2 pts over: of "
           f"{16 * a.sets}, those more than 2 points above their floor (the gross errors, summed over sets); sets "
           f"fell/rose, median change: each set's error against its own at the previous count")
     print(f"{time.perf_counter() - t0:.0f} s")
-    print(" ".join(f"median_error_{n}={med['agent'][n]:.4f}" for n in checks))   # 4 places: 2 % is a target
+    print(" ".join(f"median_error_{n}={errs[n][1]:.4f}" for n in checks))   # 4 places: 2 % is a target
 
 
 if __name__ == "__main__":

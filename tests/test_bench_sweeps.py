@@ -82,3 +82,99 @@ def test_the_benchs_rows_and_figures_are_the_sweeps(tmp_path, ablation, local_ra
              and r["set_group"] == "sets of 8"]
     assert ablation.final_share(swept, "paper", "sets of 8", "color", "I") == \
         sum(r["color"] == "I" for r in final) / len(final) and len(final) == 4
+
+
+def _bench(name: str):
+    sys.path.insert(0, str(BENCHES))
+    try:
+        spec = importlib.util.spec_from_file_location(f"{name}_bench", BENCHES / f"{name}.py")
+        mod = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(mod)
+        return mod
+    finally:
+        sys.path.remove(str(BENCHES))
+
+
+def _run_bench(name: str, *flags: str) -> list[str]:
+    """The bench as a script (tiny flags), under a timeout: its stdout's lines."""
+    import subprocess
+    r = subprocess.run([sys.executable, f"benches/{name}.py", *flags], cwd=ROOT, capture_output=True, text=True,
+                       timeout=600)
+    assert r.returncode == 0, r.stderr[-2000:]
+    return r.stdout.splitlines()
+
+
+def _last_line(lines: list[str]) -> dict:
+    return {k: float(v) for k, v in (x.split("=") for x in lines[-1].split())}
+
+
+def test_the_generalization_and_learning_curve_defaults_are_their_sweep_files():
+    gen, lc = _bench("generalization"), _bench("learning_curve")
+    _, shipped = sweep.load_sweep(BENCHES / "generalization.toml")
+    for model in ("extended", "paper"):
+        _, mine = sweep.resolve(gen.sweep_doc(model, 100, 30, 24, 0), ROOT)
+        assert sorted(c["id"] for c in mine) == sorted(c["id"] for c in shipped
+                                                       if c["spec"]["condition"]["name"] == model)
+        assert len(mine) == 130
+    _, shipped = sweep.load_sweep(BENCHES / "learning_curve.toml")
+    _, mine = sweep.resolve(lc.sweep_doc("extended", 20, 230, 0, (8, 16, 32, 64, 128, 230)), ROOT)
+    assert [c["id"] for c in mine] == [c["id"] for c in shipped] and len(mine) == 20
+
+
+def test_a_tiny_generalization_run_prints_the_sweeps_figures(tmp_path, local_ray, capsys):
+    """benches/generalization.py (1 set of 8 and 1 of 24, 2 orders, the paper model) against its cells through
+    train/sweep.py on Ray: its last line is the figures worked out by hand from the sweep's rows."""
+    gen = _bench("generalization")
+    lines = _run_bench("generalization", "--sets", "1", "--long-sets", "1", "--orders", "2", "--first-seed", "3",
+                       "--model", "paper")
+    path = tmp_path / "gen.toml"
+    path.write_text(_toml(gen.sweep_doc("paper", 1, 1, 2, 3)))
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
+    capsys.readouterr()
+    rows = sweep.read_cells(tmp_path / "out").to_pylist()
+    assert len(rows) == 2 * 8 + 2 * 24
+    got = _last_line(lines)
+    for n_train, key, equal_key in ((8, "median_error_8", "sequential_equals_batch"),
+                                    (24, "median_error_24", "sequential_equals_batch_24")):
+        last = [r for r in rows if r["n_train"] == n_train and r["episode"] == n_train]
+        assert len(last) == 2 and all(r["batch_knowledge"] for r in last)
+        # two runs: the median is their mean; the share of the two orders whose final knowledge is the batch answer
+        assert got[key] == float(f'{(last[0]["probe_rel_error"] + last[1]["probe_rel_error"]) / 2:.3f}')
+        assert got[equal_key] == sum(r["knowledge"] == r["batch_knowledge"] for r in last) / 2
+        same = float(last[0]["knowledge"] == last[1]["knowledge"])
+        assert got["sets_order_independent" + ("_24" if n_train == 24 else "")] == same
+    answer = next(r["batch_knowledge"] for r in rows if r["n_train"] == 8)
+    assert any(f"batch answers: {answer} 1" in x for x in lines)
+    # and train/report.py's CSV says the same
+    from train.report import report
+    s = report(tmp_path / "out")
+    assert s["errors"]["paper", "sets of 8"][8][1] == pytest.approx(got["median_error_8"], abs=5e-4)
+
+
+def test_a_tiny_learning_curve_run_prints_the_sweeps_figures(tmp_path, local_ray, capsys):
+    """benches/learning_curve.py (2 lives of 10 objects) against its cells through train/sweep.py on Ray: its
+    figures are the ones worked out by hand from the sweep's rows."""
+    lc = _bench("learning_curve")
+    lines = _run_bench("learning_curve", "--sets", "2", "--objects", "10", "--first-seed", "3")
+    path = tmp_path / "lc.toml"
+    path.write_text(_toml(lc.sweep_doc("extended", 2, 10, 3, (8, 10))))
+    assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
+    capsys.readouterr()
+    rows = sweep.read_cells(tmp_path / "out").to_pylist()
+    assert len(rows) == 2 * 10
+    got = _last_line(lines)
+    for n in (8, 10):
+        at = [r for r in rows if r["episode"] == n]
+        assert len(at) == 2 and all(len(r["probe_errors"]) == len(r["probe_floors"]) == 16 for r in at)
+        assert got[f"median_error_{n}"] == float(f'{(at[0]["probe_rel_error"] + at[1]["probe_rel_error"]) / 2:.4f}')
+        row = next(x for x in lines if x.split()[:1] == [str(n)])
+        over = [sum(e - f for e, f in zip(r["probe_errors"], r["probe_floors"])) / 16 for r in at]
+        gross = sum(e - f > 0.02 for r in at for e, f in zip(r["probe_errors"], r["probe_floors"]))
+        cols = row.split()
+        assert cols[4] == f'{(at[0]["stored"] + at[1]["stored"]) / 2:.0f}'
+        assert cols[5] == f'{(at[0]["recalled"] + at[1]["recalled"]) / 2:.1f}'
+        assert float(cols[6]) == pytest.approx((over[0] + over[1]) / 2, abs=6e-5) and int(cols[7]) == gross
+    before = {r["cell"]: r["probe_rel_error"] for r in rows if r["episode"] == 8}
+    change = [r["probe_rel_error"] - before[r["cell"]] for r in rows if r["episode"] == 10]
+    row10 = next(x for x in lines if x.split()[:1] == ["10"]).split()
+    assert row10[8] == f"{sum(d < 0 for d in change)}/{sum(d > 0 for d in change)}"

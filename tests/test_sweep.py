@@ -286,13 +286,15 @@ def test_the_runner_refuses_eight_objects_through_a_refusing_memory_of_four_in_o
 def test_cells_are_named_by_a_stable_hash_of_their_spec(tmp_path):
     _, cells = sweep.load_sweep(_write(tmp_path, TINY))
     assert len({c["id"] for c in cells}) == 4
-    spec = {"format": 1, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
+    spec = {"format": 2, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
                                                                 "overrides": {}},
             "set_group": "fours", "set": "5", "source": {"generate": {"seed": 5, "train": 4, "probe": 3,
                                                                       "pairs": False, "jar": "random"}},
             "n_train": 4, "n_probe": 3, "seed": 5, "orders": "2", "checks": [1, 3, 4]}
     assert spec in [c["spec"] for c in cells]
-    assert sweep.cell_id(spec) == "adf20a285d537c59"   # fixed: a resumed sweep finds the cells an older run wrote
+    # fixed: a resumed sweep finds the cells an older run wrote (format 1's rows, without the batch answer, memory
+    # and per-probe columns, were "adf20a285d537c59")
+    assert sweep.cell_id(spec) == "0d2ac7d39c86682e"
 
 
 def _hand_made_table():
@@ -322,10 +324,11 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
         sweep.write_cell(tmp_path, cell, table.filter(pc.equal(table.column("cell"), cell)))
     assert report_mod.main([str(tmp_path)]) == 0
     csv = (tmp_path / "report.csv").read_text().splitlines()
-    assert csv == ["condition,set_group,episode,n,error_median,error_q25,error_q75,cells,order_agreement,"
-                   "colour_irrelevant",
-                   "a,g,2,4,0.250000,0.175000,0.325000,2,0.5000,0.7500",
-                   "b,g,2,4,2.500000,1.750000,3.500000,2,1.0000,0.0000"]
+    assert csv == ["condition,set_group,episode,n,error_median,error_q25,error_q75,floor,over_floor,probes_over_2pts,"
+                   "stored,recalled,runs_fell,runs_rose,change_median,cells,order_agreement,colour_irrelevant,"
+                   "weight_dominant,equals_batch",
+                   "a,g,2,4,0.250000,0.175000,0.325000,,,,,,,,,2,0.5000,0.7500,1.0000,",
+                   "b,g,2,4,2.500000,1.750000,3.500000,,,,,,,,,2,1.0000,0.0000,0.0000,"]
     md = (tmp_path / "report.md").read_text()
     assert "| a | 0.2500 (0.175-0.325) |" in md and "| b | 2.5000 (1.750-3.500) |" in md
     assert "| a | g | 2 | 0.500 | 0.750 |" in md

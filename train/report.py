@@ -26,6 +26,7 @@ import io
 import json
 import math
 import sys
+from collections import Counter
 from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
@@ -70,6 +71,7 @@ def summarise(table, spec: dict | None = None) -> dict:
             errors.setdefault((c, g), {})[ep] = (len(v), float(med), float(q25), float(q75))
     for k in errors:
         errors[k] = dict(sorted(errors[k].items()))
+    checks = _checks(checked)
 
     final = table.filter(pc.equal(table.column("episode"), table.column("n_train")))
     knowledge: dict = {}
@@ -78,22 +80,78 @@ def summarise(table, spec: dict | None = None) -> dict:
             [("knowledge", "count_distinct"), ("order", "count")])
         for c, g, distinct, orders in zip(*(per_cell.column(k).to_pylist() for k in (
                 "condition", "set_group", "knowledge_count_distinct", "order_count"))):
-            k = knowledge.setdefault((c, g), {"cells": 0, "_multi": 0, "_same": 0, "_runs": 0, "_colour_i": 0})
+            k = knowledge.setdefault((c, g), {"cells": 0, "_multi": 0, "_same": 0, "_runs": 0, "_colour_i": 0,
+                                              "_weight_d": 0, "_batched": 0, "_equal": 0})
             k["cells"] += 1
             if orders > 1:
                 k["_multi"] += 1
                 k["_same"] += distinct == 1
-        colour_i = pc.equal(final.column("color"), "I")
-        for c, g, i in zip(final.column("condition").to_pylist(), final.column("set_group").to_pylist(),
-                           colour_i.to_pylist()):
-            knowledge[c, g]["_runs"] += 1
-            knowledge[c, g]["_colour_i"] += bool(i)
-        for k in knowledge.values():
+        cols = ("condition", "set_group", "cell", "order", "knowledge", "batch_knowledge")
+        answers: dict = {}   # (condition, group) -> {cell: its batch answer}
+        for c, g, cell, _, key, batch in zip(*(final.column(k).to_pylist() for k in cols)):
+            k = knowledge[c, g]
+            k["_runs"] += 1
+            k["_colour_i"] += key[0] == "I"
+            k["_weight_d"] += key[3] == "D"
+            if batch is not None:
+                k["_batched"] += 1
+                k["_equal"] += key == batch
+                answers.setdefault((c, g), {})[cell] = batch
+        for (c, g), k in knowledge.items():
             k["order_agreement"] = k["_same"] / k["_multi"] if k["_multi"] else None
             k["colour_irrelevant"] = k["_colour_i"] / k["_runs"]
+            k["weight_dominant"] = k["_weight_d"] / k["_runs"]
+            k["equals_batch"] = k["_equal"] / k["_batched"] if k["_batched"] else None
+            # the batch answers of the cells, most common first (ties: in order of first appearance)
+            k["batch_answers"] = dict(Counter(answers.get((c, g), {}).values()).most_common())
             for x in [x for x in k if x.startswith("_")]:
                 del k[x]
-    return {"conditions": conditions, "groups": groups, "errors": errors, "knowledge": knowledge}
+    return {"conditions": conditions, "groups": groups, "errors": errors, "knowledge": knowledge, "checks": checks}
+
+
+def _median(values: list) -> float:
+    import numpy as np
+    return float(np.median(np.asarray(values, dtype=np.float64)))
+
+
+def _checks(checked) -> dict:
+    """Per (condition, set group) and episode count with probe errors: {"floor": the median over runs of each run's
+    median senses' floor, "over_floor": the median over runs of the run's mean over probes of error less floor,
+    "over_2pts": the probes more than 2 points above their floor, summed over runs, "stored": the median over runs of
+    the episodes stored, "recalled": the median over runs of the episodes recalled per probe cue, and after the first
+    count "fell", "rose" (the runs whose error fell / rose since the previous count) and "change" (their median
+    change)}. Rows without the per-probe columns (no probes) give none."""
+    import numpy as np
+    out: dict = {}
+    if not checked.num_rows:
+        return out
+    cols = ("condition", "set_group", "cell", "order", "episode", "probe_rel_error", "probe_errors", "probe_floors",
+            "stored", "recalled")
+    runs: dict = {}   # (condition, group) -> {episode: {(cell, order): (error, over_floor, over_2pts, ...)}}
+    for c, g, cell, order, ep, err, errs, floors, stored, recalled in zip(*(checked.column(k).to_pylist()
+                                                                           for k in cols)):
+        if errs is None or floors is None:
+            continue
+        excess = np.asarray(errs, dtype=np.float64) - np.asarray(floors, dtype=np.float64)
+        f = np.sort(np.asarray(floors, dtype=np.float64))
+        floor = f[len(f) // 2] if len(f) % 2 else (f[len(f) // 2 - 1] + f[len(f) // 2]) / 2
+        runs.setdefault((c, g), {}).setdefault(ep, {})[cell, order] = (
+            err, float(excess.mean()), int((excess > 0.02).sum()), float(floor), stored, recalled)
+    for key, by_ep in runs.items():
+        prev = None
+        for ep in sorted(by_ep):
+            r = by_ep[ep]
+            fig = {"floor": _median([v[3] for v in r.values()]), "over_floor": _median([v[1] for v in r.values()]),
+                   "over_2pts": sum(v[2] for v in r.values()), "stored": _median([v[4] for v in r.values()]),
+                   "recalled": _median([v[5] for v in r.values()])}
+            if prev is not None:
+                change = [r[k][0] - prev[k][0] for k in r if k in prev]
+                if change:
+                    fig.update(fell=sum(d < 0 for d in change), rose=sum(d > 0 for d in change),
+                               change=_median(change))
+            out.setdefault(key, {})[ep] = fig
+            prev = r
+    return out
 
 
 def _fmt(x, digits: int = 4) -> str:
@@ -103,19 +161,25 @@ def _fmt(x, digits: int = 4) -> str:
 def write_csv(s: dict, path: Path) -> None:
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(["condition", "set_group", "episode", "n", "error_median", "error_q25", "error_q75", "cells",
-                "order_agreement", "colour_irrelevant"])
+    w.writerow(["condition", "set_group", "episode", "n", "error_median", "error_q25", "error_q75", "floor",
+                "over_floor", "probes_over_2pts", "stored", "recalled", "runs_fell", "runs_rose", "change_median",
+                "cells", "order_agreement", "colour_irrelevant", "weight_dominant", "equals_batch"])
     for g in s["groups"]:
         for c in s["conditions"]:
             k = s["knowledge"].get((c, g))
             if k is None:
                 continue
-            tail = [k["cells"], _fmt(k["order_agreement"]), _fmt(k["colour_irrelevant"])]
+            tail = [k["cells"], _fmt(k["order_agreement"]), _fmt(k["colour_irrelevant"]), _fmt(k["weight_dominant"]),
+                    _fmt(k["equals_batch"])]
             errs = s["errors"].get((c, g)) or {}
             if not errs:   # no probes, or no checks: the knowledge figures still have a row
-                w.writerow([c, g, "", 0, "", "", ""] + tail)
+                w.writerow([c, g, "", 0, "", "", ""] + [""] * 8 + tail)
             for ep, (n, med, q25, q75) in errs.items():
-                w.writerow([c, g, ep, n, _fmt(med, 6), _fmt(q25, 6), _fmt(q75, 6)] + tail)
+                f = (s.get("checks") or {}).get((c, g), {}).get(ep, {})
+                mid = [_fmt(f.get("floor"), 6), _fmt(f.get("over_floor"), 6), f.get("over_2pts", ""),
+                       _fmt(f.get("stored"), 1), _fmt(f.get("recalled"), 3), f.get("fell", ""), f.get("rose", ""),
+                       _fmt(f.get("change"), 6)]
+                w.writerow([c, g, ep, n, _fmt(med, 6), _fmt(q25, 6), _fmt(q75, 6)] + mid + tail)
     _write(path, buf.getvalue())
 
 
@@ -164,17 +228,38 @@ def write_md(s: dict, path: Path, out: Path, n_cells: int, spec: dict | None) ->
         lines.append("")
     if not any_err:
         lines += ["No probe errors were recorded (no probes, or no checks).", ""]
+    floors = [(g, c) for g in s["groups"] for c in s["conditions"] if (s.get("checks") or {}).get((c, g))]
+    if floors:
+        lines += ["## Memory and the senses' floor", "",
+                  "per episode count with probe errors, medians over the (set, seed, order) runs: episodes stored, "
+                  "episodes recalled per probe cue, the senses' floor (Archimedes on the probes as measured), the mean "
+                  "over probes of the error less each probe's floor; probes more than 2 points above their floor "
+                  "(summed over runs); runs whose error fell / rose since the previous count, and the median change.",
+                  "", "| condition | set group | n | stored | recalled | floor | over floor | probes > 2 pts | "
+                  "fell/rose | median change |", "| --- | --- | --- | --- | --- | --- | --- | --- | --- | --- |"]
+        for g, c in floors:
+            for ep in _shown(list(s["checks"][c, g])):
+                f = s["checks"][c, g][ep]
+                moved = f"{f['fell']}/{f['rose']}" if "fell" in f else ""
+                lines.append(f"| {c} | {g} | {ep} | {f['stored']:.0f} | {f['recalled']:.1f} | {f['floor']:.4f} | "
+                             f"{f['over_floor']:+.4f} | {f['over_2pts']} | {moved} | {_fmt(f.get('change'))} |")
+        lines.append("")
     lines += ["## Knowledge after the last episode", "",
               "same in every order: the share of cells (set, seed) whose final knowledge key is the same in all its "
-              "orders (empty: one order per cell); colour irrelevant: the share of (set, seed, order) whose final "
-              "colour state is I.", "",
-              "| condition | set group | cells | same in every order | colour irrelevant |", "| --- | --- | --- | --- | --- |"]
+              "orders (empty: one order per cell); colour irrelevant, weight dominant: the share of (set, seed, order) "
+              "whose final colour state is I, whose weight state is D; equals the batch answer: the share of (set, "
+              "seed, order) whose final knowledge is the set's batch answer (every pair of its episodes compared at "
+              "once); batch answers: per cell, most common first.", "",
+              "| condition | set group | cells | same in every order | colour irrelevant | weight dominant | "
+              "equals the batch answer | batch answers |", "| --- | --- | --- | --- | --- | --- | --- | --- |"]
     for g in s["groups"]:
         for c in s["conditions"]:
             k = s["knowledge"].get((c, g))
             if k:
+                answers = ", ".join(f"{a} {n}" for a, n in list(k["batch_answers"].items())[:6])
                 lines.append(f"| {c} | {g} | {k['cells']} | {_fmt(k['order_agreement'], 3)} | "
-                             f"{_fmt(k['colour_irrelevant'], 3)} |")
+                             f"{_fmt(k['colour_irrelevant'], 3)} | {_fmt(k['weight_dominant'], 3)} | "
+                             f"{_fmt(k['equals_batch'], 3)} | {answers} |")
     lines += ["", "![error against experience](errors.png)", "", "![order agreement](agreement.png)", ""]
     _write(path, "\n".join(lines))
 

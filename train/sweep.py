@@ -39,7 +39,9 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "train/sweep.py"
-FORMAT = 1               # in every cell's hash: bumped when the rows a spec gives change
+FORMAT = 2               # in every cell's hash: bumped when the rows a spec gives change (2: batch_knowledge,
+                         # stored, recalled, probe_errors, probe_floors)
+BATCH_MAX_TRAIN = 500    # the batch answer compares every pair of a set's train objects: up to this many
 WORLDS = ("closed_form", "closed_form_exact", "physics")
 from train.run import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables and rules, without torch
 MAX_CELLS = 1_000_000
@@ -405,7 +407,9 @@ def schema():
         ("n_orders", pa.int32()), ("order", pa.int32()), ("episode", pa.int32()), ("object", pa.string()),
         ("predicted_cm3", pa.float64()), ("observed_cm3", pa.float64()), ("archimedes_cm3", pa.float64()),
         ("sank", pa.bool_()), ("goal_reached", pa.bool_()), ("rules", pa.string()), ("knowledge", pa.string()),
-        *[(p, pa.string()) for p in PROPERTY_COLUMNS], ("probe_rel_error", pa.float64())])
+        *[(p, pa.string()) for p in PROPERTY_COLUMNS], ("probe_rel_error", pa.float64()),
+        ("batch_knowledge", pa.string()), ("stored", pa.int32()), ("recalled", pa.float64()),
+        ("probe_errors", pa.list_(pa.float64())), ("probe_floors", pa.list_(pa.float64()))])
 
 
 def _median_rows(err):
@@ -442,8 +446,14 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         B, Q = orders.shape[0], len(pnames)
         agent = Agent(agent_config(cell["condition"], cell["seed"], n), batch=B)
         checks = set(cell["checks"])
-        predicted, fired, state = [], [], []
+        predicted, fired, state, stored = [], [], [], []
         probe_err = torch.full((n, B), float("nan"), dtype=torch.float64)
+        recalled = torch.full((n, B), float("nan"), dtype=torch.float64)
+        per_probe = {}   # episode index -> (B, Q) each probe's error
+        floors = None
+        if Q:   # the senses' floor: Archimedes applied to the probes as the robot measures them (water at 1 g/cm^3)
+            sensed = torch.minimum(pmeas["mass_g"], pmeas["fill"] * pmeas["extent_cm"].prod(-1))
+            floors = torch.nan_to_num((sensed - truth).abs() / truth, nan=1.0).double().tolist()
         for t in range(n):
             obj = orders[:, t]
             res = agent.step({k: v[obj] for k, v in meas.items()}, observed[obj].float(), ep["goal_before"][obj],
@@ -451,11 +461,19 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
             predicted.append(res.expected.double())
             fired.append(res.rules_fired().clone())
             state.append(agent.rules.state.clone())
+            stored.append(agent.memory.count.clone())
             if t + 1 in checks and Q:
                 probe = agent.select(torch.arange(B).repeat_interleave(Q))
                 p = probe.anticipate({k: v.repeat(B, *([1] * (v.ndim - 1))) for k, v in pmeas.items()})
                 err = torch.nan_to_num((p.expected.view(B, Q) - truth).abs() / truth, nan=1.0)   # none: 100 %
                 probe_err[t] = _median_rows(err).double()   # as benches/ablation.py
+                per_probe[t] = err.double()
+                recalled[t] = p.recall.valid.sum(1).view(B, Q).double().mean(1)   # episodes recalled per cue
+        batch = None
+        if n <= BATCH_MAX_TRAIN:   # the batch answer: every pair of the set's episodes compared at once
+            from aesop_torch.rules import batch_knowledge
+            codes = batch_knowledge(*agent.pairwise_evidence(meas, observed.float(), ep["sank"]), agent.config.rules)
+            batch = "".join(KNOWLEDGE_LETTERS[c] for c in codes.tolist())
     # rows order by order, episode by episode: (n, B) -> (B, n) -> flat
     flat = lambda x: np.ascontiguousarray(np.asarray(x).T).reshape(-1)
     obj_idx = orders.numpy()                                            # (B, n)
@@ -489,6 +507,13 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         "knowledge": pa.array(knowledge, pa.string()),
         **{p: pa.array([k[i] for k in knowledge], pa.string()) for i, p in enumerate(PROPERTY_COLUMNS)},
         "probe_rel_error": pa.array(perr, pa.float64(), mask=np.isnan(perr)),
+        "batch_knowledge": col(batch, pa.string()),
+        "stored": pa.array(flat(torch.stack(stored).numpy()), pa.int32()),
+        "recalled": pa.array(flat(recalled.numpy()), pa.float64(), mask=np.isnan(flat(recalled.numpy()))),
+        "probe_errors": pa.array([per_probe[t][b].tolist() if t in per_probe else None
+                                  for b in range(B) for t in range(n)], pa.list_(pa.float64())),
+        "probe_floors": pa.array([floors if t in per_probe else None for b in range(B) for t in range(n)],
+                                 pa.list_(pa.float64())),
     }
     return pa.table([data[f.name] for f in s], schema=s)
 
