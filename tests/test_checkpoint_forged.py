@@ -7,6 +7,7 @@ The runs are the closed-form stand-in for the physics of tests/test_checkpoint.p
 
 import hashlib
 import math
+import random
 
 import pytest
 import torch
@@ -224,3 +225,26 @@ def test_a_checkpoint_of_a_run_with_the_most_objects_the_file_allows_loads(tmp_p
     again = load_experiment(tmp_path / "latest.pt")
     assert len(again.train_names) == n and again.agent.memory.patterns.shape[1] == n and again.t == 2
     assert ck.digest(again.state_dict()) == ck.digest(exp.state_dict())
+
+
+def test_an_extended_life_whose_uncertainty_fired_more_often_than_its_episodes_loads(tmp_path):
+    """The extended model counts Uncertainty once per comparison, and an episode is compared with every episode it
+    recalls: over 8 episodes the count may pass 8 (a fresh `--model extended` run's own checkpoint was refused)."""
+    from aesop_torch.agent_config import AgentConfig
+    from sim.objects import load_objects
+    objects = load_objects(runner.DEFAULT_OBJECTS)
+    outcomes, probes = closed_form_outcomes(objects)
+    names = [o.name for o in objects.train]
+    rng = random.Random(0)
+    orders = [rng.sample(range(len(names)), len(names)) for _ in range(8)]   # orders 5, 7 and 8 count 9
+    exp = Experiment(names, [o.name for o in objects.probe], orders, outcomes=outcomes, probes=probes,
+                     config=AgentConfig.extended())
+    for _ in names:
+        exp.step(lambda name, b, t: outcomes[name])
+    count = exp.agent.rules.uncertain_count
+    assert int(count.max()) > exp.t   # the case: more Uncertainty than episodes
+    path = tmp_path / "latest.pt"
+    run = {"objects": objects.canonical(), "seed": 0, "physics": "cached", "orders_arg": "8",
+           "model": "extended", "ablate": []}
+    ck.save_atomic({"run": run, "experiment": exp.state_dict()}, path)
+    assert torch.equal(load_experiment(path).agent.rules.uncertain_count, count)

@@ -73,7 +73,8 @@ def _agent_values_problem(e: dict) -> str | None:
       dominant strength, Elimination and Uncertainty only lower them;
     - the hub's branches in 0..1 (map activities) and their norms at most sqrt(units);
     - episodes stored (memory.count) at most the records' encoded episodes; assemblies at most t; a neuron's usage at
-      most the assemblies; rules fired once per property and episode; states codes of rules.STATES."""
+      most the assemblies; rules fired once per property and episode, Uncertainty counted once per comparison (at most
+      t * t); states codes of rules.STATES."""
     from aesop_torch.encoders import default_map_configs
     from aesop_torch.rules import STATES
     from aesop_torch.som import SelfOrganizingMap
@@ -100,8 +101,8 @@ def _agent_values_problem(e: dict) -> str | None:
               ("hub.n_assemblies", 0, t), ("hub.usage", 0, t), ("rules.state", 0, len(STATES) - 1)]
     if "rules.strength" in a:   # the paper model's rules
         checks += [("rules.strength", 0.0, top), ("rules.fired", 0, t)]
-    if "rules.uncertain_count" in a:   # the extended model's
-        checks += [("rules.uncertain_count", 0, t)]
+    if "rules.uncertain_count" in a:   # the extended model's: once per comparison, an episode against each recalled
+        checks += [("rules.uncertain_count", 0, t * t)]   # one (at most t of them), so up to t * t
     for key, lo, hi in checks:
         if p := within(key, lo, hi):
             return p
