@@ -23,13 +23,22 @@ cannot be built (a config the scene does not admit) fails every job with one Wor
 initializer, it would have its workers respawned for ever.
 
 Ctrl-C belongs to the runner: the workers ignore SIGINT (they are started with it ignored, so not even their start-up
-imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint.
+imports can print a traceback), and the runner ends the pool, says one line and keeps its last checkpoint. SIGTERM and
+SIGHUP end a worker at once and silently (their default), whatever handler the runner had when it forked it; a worker
+whose runner dies (even by SIGKILL) is killed by the kernel (Linux: PR_SET_PDEATHSIG), so none lingers or prints.
+
+A worker that dies (killed, out of memory) is not replaced: the job it held would never be answered, and the runner
+would wait for ever. Every wait on a pool's result looks at its processes every WATCH_S seconds and raises WorkerDied,
+naming the process, when one has died; `end_pool` ends a pool whatever state its dead processes left its locks in.
 """
 
 from __future__ import annotations
 
+import ctypes
+import ctypes.util
 import importlib
 import multiprocessing as mp
+import multiprocessing.pool
 import os
 import signal
 import sys
@@ -37,15 +46,29 @@ import threading
 
 _WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
 START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
+WATCH_S = 0.25   # how often a wait on a pool looks whether its processes are alive
+PR_SET_PDEATHSIG = 1   # linux/prctl.h
 
 
 class WorldBuildError(RuntimeError):
     """A worker could not build its world (a world config the scene does not admit); the message is one line."""
 
 
+class WorkerDied(RuntimeError):
+    """A pool's process died while the caller waited on it: `what` (e.g. "a physics worker"), `pid` and `how`
+    ("killed by SIGKILL", "exit code 1"); the message is one line."""
+
+    def __init__(self, what: str, pid: int, exitcode: int):
+        try:
+            how = f"killed by {signal.Signals(-exitcode).name}" if exitcode < 0 else f"exit code {exitcode}"
+        except ValueError:
+            how = f"killed by signal {-exitcode}"
+        self.what, self.pid, self.exitcode, self.how = what, pid, exitcode, how
+        super().__init__(f"{what} (pid {pid}) died ({how})")
+
+
 def _init(objects, seed: int, config=None) -> None:
     global _WORLD
-    signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since the fork (or exec)
     import torch
 
     torch.set_num_threads(1)  # one process per core
@@ -85,23 +108,137 @@ def cores() -> int:
     return len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
 
 
-def quiet_pool(processes: int, initializer, initargs: tuple = ()):
-    """A process pool started with SIGINT ignored, so its processes inherit that (Ctrl-C belongs to the runner)."""
+def _die_with(parent: int) -> None:
+    """In a worker: SIGTERM and SIGHUP at their defaults (a forked worker inherits the runner's handlers, which would
+    raise here and print a traceback), and killed by the kernel when the process that forked it dies (Linux; the
+    kernel ties this to the forking thread: a pool lives as long as the thread that made it)."""
+    for sig in (signal.SIGTERM, signal.SIGHUP):
+        signal.signal(sig, signal.SIG_DFL)
+    if sys.platform.startswith("linux"):
+        libc = ctypes.CDLL(ctypes.util.find_library("c") or "libc.so.6", use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+        if os.getppid() != parent:   # it died before the prctl took
+            os._exit(0)
+
+
+def _start(parent: int, initializer, initargs: tuple) -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)   # already ignored since the fork (or exec)
+    _die_with(parent)
+    if initializer is not None:
+        initializer(*initargs)
+
+
+class _NotReplaced:
+    """What the pool's thread gets in place of a process that died: nothing runs, nothing to wait for."""
+
+    name, daemon, exitcode, pid = "", True, None, None
+
+    def start(self):
+        pass
+
+    def terminate(self):
+        pass
+
+    def is_alive(self) -> bool:
+        return False
+
+
+class QuietPool(multiprocessing.pool.Pool):
+    """A Pool whose dead processes are not replaced and whose waits notice them (see the module docstring)."""
+
+    what = "a worker process"
+
+    def __init__(self, *args, **kwargs):
+        started = []
+
+        def process(ctx, *a, **kw):
+            """Pool.Process, for the processes the pool starts with only: a replacement would not answer the job
+            its predecessor took with it (and one forked while the runner ends could miss the end)."""
+            return _NotReplaced() if started else ctx.Process(*a, **kw)
+
+        self.Process = process   # the pool's thread respawns through the Process it was given at start
+        super().__init__(*args, **kwargs)
+        started.append(True)
+
+    def watch(self) -> None:
+        """Raise WorkerDied if one of the pool's processes has died."""
+        for p in self.processes:
+            if p.exitcode is not None:
+                raise WorkerDied(self.what, p.pid, p.exitcode)
+
+    def imap(self, func, iterable, chunksize=1):
+        """Pool.imap (the jobs handed over now), its results waited for while the pool's processes are alive."""
+        return _watched_iter(self, super().imap(func, iterable, chunksize))
+
+    def apply_async(self, func, args=(), kwds={}, callback=None, error_callback=None):   # noqa: B006  Pool's own
+        return _Watched(self, super().apply_async(func, args, kwds, callback, error_callback))
+
+
+def _watched(pool: QuietPool, get):
+    """get(timeout), waited for while the pool's processes are alive."""
+    while True:
+        try:
+            return get(WATCH_S)
+        except mp.TimeoutError:
+            pool.watch()
+
+
+def _watched_iter(pool: QuietPool, results):
+    while True:
+        try:
+            yield _watched(pool, results.next)
+        except StopIteration:
+            return
+
+
+class _Watched:
+    """An AsyncResult whose get() notices a dead process of its pool."""
+
+    def __init__(self, pool: QuietPool, result):
+        self._pool, self._result = pool, result
+
+    def ready(self) -> bool:
+        return self._result.ready()
+
+    def get(self, timeout=None):
+        if timeout is not None:
+            return self._result.get(timeout)
+        return _watched(self._pool, self._result.get)
+
+
+def quiet_pool(processes: int, initializer, initargs: tuple = (), what: str = "a worker process") -> QuietPool:
+    """A QuietPool started with SIGINT ignored, so its processes inherit that (Ctrl-C belongs to the runner); what:
+    how WorkerDied names its processes."""
     main = threading.current_thread() is threading.main_thread()   # only it may set handlers
     previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
     try:
-        return mp.get_context(START_METHOD).Pool(processes, initializer=initializer, initargs=initargs)
+        pool = QuietPool(processes, initializer=_start, initargs=(os.getpid(), initializer, initargs),
+                         context=mp.get_context(START_METHOD))
     finally:
         if main:
             signal.signal(signal.SIGINT, previous)
+    pool.what, pool.processes = what, list(pool._pool)   # _pool loses the dead; this list keeps them for watch()
+    return pool
 
 
 def end_pool(pool) -> None:
-    """End a quiet_pool (None: nothing). Every result the caller wants is in: its idle processes need no orderly
-    shutdown (0.4 s)."""
-    if pool is not None:
-        pool.terminate()
-        pool.join()
+    """End a quiet_pool (None: nothing). Every result the caller wants is in (or the run is ending): its processes
+    need no orderly shutdown (0.4 s) and are killed. A process killed while it held one of the pool's queue locks
+    (an idle worker holds the task queue's while it waits) would leave Pool.terminate waiting for ever: with every
+    process dead, the locks are freed first."""
+    if pool is None:
+        return
+    for p in getattr(pool, "processes", pool._pool):
+        if p.exitcode is None:
+            p.kill()
+    for p in getattr(pool, "processes", pool._pool):
+        p.join()
+    for lock in (pool._inqueue._rlock, getattr(pool._outqueue, "_wlock", None)):
+        if lock is not None:
+            lock.acquire(False)   # held by a dead process or by this call: free either way
+            lock.release()
+    pool.terminate()
+    pool.join()
 
 
 class Physics:
@@ -120,7 +257,8 @@ class Physics:
             return
         if START_METHOD == "fork":
             import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
-        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config))
+        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config),
+                                what="a physics worker")
 
     def submit(self, jobs: list[tuple]):
         """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited

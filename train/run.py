@@ -12,8 +12,9 @@ flag wins over the file.
 Writes into DIR: tensorboard runs (tb/order_<i>/), checkpoints/latest.pt (after every episode, atomic, checksummed),
 config.json (the run's config, at the start), figure2.png, frames/ (with --frames) and summary.json (CONTRACTS.md).
 DIR belongs to one run at a time (a lock on DIR/.lock). Bad input: one line on stderr, exit code 2, nothing written.
-Ctrl-C: one line, exit code 130; a full disk or another write error: one line, exit code 1; either way the last
-checkpoint is intact and --resume continues.
+Ctrl-C: one line, exit code 130; SIGTERM, SIGHUP: the same, exit code 143, 129 (128 + the signal's number); a full
+disk or another write error, or a worker process that died: one line, exit code 1; either way the last checkpoint is
+intact and --resume continues. A closed stdout (`>&-`): the run goes on without console output.
 """
 
 from __future__ import annotations
@@ -53,6 +54,68 @@ SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
 class UsageError(Exception):
     """Bad input: reported as one line and exit code 2."""
+
+
+class Ended(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (a `kill`, `timeout`, a closed terminal): the run ends as on Ctrl-C, a KeyboardInterrupt to
+    every handler of one, with exit code 128 + the signal's number."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+ENDING = (signal.SIGTERM, signal.SIGHUP)   # the signals that end a run as Ctrl-C does
+_RUNNER = {"pid": None}   # the process whose handlers raise Ended (a forked child inherits them: see _ended)
+
+
+def _ended(signum, frame):
+    if os.getpid() != _RUNNER["pid"]:   # a worker forked before it reset its handlers: the default, silently
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
+    raise Ended(signum)
+
+
+def _how(e: KeyboardInterrupt) -> tuple[str, int]:
+    """(" by SIGTERM" or "", exit code) of an interruption: Ctrl-C 130, a signal 128 + its number."""
+    signum = getattr(e, "signum", signal.SIGINT)
+    return ("" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"), 128 + signum
+
+
+@contextlib.contextmanager
+def _ending_signals():
+    """SIGTERM and SIGHUP raise Ended while main() runs (only the main thread may set handlers; one ignored, as
+    under nohup, stays ignored); the previous handlers afterwards, so a signal after main() ends silently."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = {sig: signal.getsignal(sig) for sig in ENDING} if main else {}
+    try:
+        for sig, handler in previous.items():
+            if handler is not signal.SIG_IGN:
+                _RUNNER["pid"] = os.getpid()
+                signal.signal(sig, _ended)
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
+
+
+def _console() -> None:
+    """A closed stdout or stderr (`>&-`): /dev/null in its place. The run goes on without console output (its
+    results are files; an error still sets the exit code), and no file the run opens can take fd 1 or 2, where
+    pybullet's C output (sim/quiet.py) would write into it."""
+    for fd, name in ((1, "stdout"), (2, "stderr")):
+        try:
+            os.fstat(fd)
+            continue
+        except OSError:
+            pass
+        null = os.open(os.devnull, os.O_WRONLY)
+        if null != fd:
+            os.dup2(null, fd)
+            os.close(null)
+        if getattr(sys, name) is None:
+            setattr(sys, name, open(fd, "w", closefd=False))
 
 
 class Parser(argparse.ArgumentParser):
@@ -594,6 +657,12 @@ def as_run(agent, n_train: int, seed: int):
 
 
 def main(argv=None) -> int:
+    _console()
+    with _ending_signals():
+        return _main(argv)
+
+
+def _main(argv=None) -> int:
     try:
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
@@ -625,23 +694,25 @@ def main(argv=None) -> int:
             return run(args, exp, objects, resumed)
         finally:
             os.close(lock)   # the kernel would at exit; a caller of main() in-process may start another run
-    except KeyboardInterrupt:   # before the run started: nothing of value was written
+    except KeyboardInterrupt as e:   # before the run started: nothing of value was written
+        by, code = _how(e)
         with _sigint_ignored():
             _close_quietly()
-            print(f"{_fresh_line()}train/run.py: interrupted before the run started", file=sys.stderr)
-        return 130
+            print(f"{_fresh_line()}train/run.py: interrupted{by} before the run started", file=sys.stderr)
+        return code
 
 
 @contextlib.contextmanager
 def _sigint_ignored():
-    """A second Ctrl-C must not interrupt the clean-up after the first (only the main thread may set handlers)."""
+    """A second Ctrl-C (or SIGTERM, SIGHUP) must not interrupt the clean-up after the first (only the main thread may
+    set handlers)."""
     main = threading.current_thread() is threading.main_thread()
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *ENDING)} if main else {}
     try:
         yield
     finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
+        for sig, handler in previous.items():
+            signal.signal(sig, handler)
 
 
 def _fresh_line() -> str:
@@ -665,21 +736,27 @@ def run(args, exp, objects, resumed: bool) -> int:
         return (f"the last checkpoint ({ckpt}, {saved['t']} of {exp.n_episodes} episodes) is intact: "
                 f"continue with the same flags and --resume --out {out}")
 
-    from train.physics import WorldBuildError
+    from train.physics import WorkerDied, WorldBuildError
 
     try:
         return _run(args, exp, objects, resumed, out, ckpt, saved, t0)
+    except WorkerDied as e:   # killed (by a person, the OOM killer): its job would never be answered
+        with _sigint_ignored():
+            _close_quietly()
+            print(f"{_fresh_line()}train/run.py: error: {e}; {last_checkpoint()}", file=sys.stderr)
+        return 1
     except WorldBuildError as e:   # a world config the scene does not admit, found by the workers building it
         with _sigint_ignored():
             _close_quietly()
             print(f"{_fresh_line()}train/run.py: error: {e} (check the config's world keys); {last_checkpoint()}",
                   file=sys.stderr)
         return 1
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
+        by, code = _how(e)
         with _sigint_ignored():
             _close_quietly()
-            print(f"{_fresh_line()}train/run.py: interrupted; {last_checkpoint()}", file=sys.stderr)
-        return 130
+            print(f"{_fresh_line()}train/run.py: interrupted{by}; {last_checkpoint()}", file=sys.stderr)
+        return code
     except OSError as e:   # a full disk (ENOSPC) or another write error: the checkpoint is written atomically
         with _sigint_ignored():
             _close_quietly()
@@ -717,7 +794,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.checkpoint import save_atomic, write_text_atomic
     from train.experiment import draw_orders, outcome_record, plain_measurement, senses_floor
     from train.drawing import Drawer
-    from train.physics import Physics
+    from train.physics import Physics, WorkerDied
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
     from train.config import RunConfig, config_dict
@@ -765,7 +842,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             with Step(f"frames of {tag}", len(outcome.frames), "frame", announce=False) as bar:
                 save_frames_png(outcome.frames, out / "frames" / tag)
                 for i, frame in enumerate(outcome.frames):  # a slider per drop in tensorboard's Images tab
-                    logs[0].writer.add_image(f"frames/{tag}", frame, i, dataformats="HWC")
+                    logs[0].image(f"frames/{tag}", frame, i)
                     bar.update()
         return outcome_record(outcome)
 
@@ -840,9 +917,12 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
     summary = build_summary(exp, population, config)
-    image = figure.get()
+    try:
+        image = figure.get()
+    except WorkerDied as e:   # the drawer's pool names its process generically
+        raise WorkerDied("the figure process", e.pid, e.exitcode) from None
     for log in logs:
-        log.writer.add_image("figure2", image, exp.n_episodes, dataformats="HWC")
+        log.image("figure2", image, exp.n_episodes)
         log.close()
     _OPEN["logs"] = []
     _close_quietly()   # the workers and the drawer: every result is in

@@ -5,12 +5,19 @@ prediction can be made), `prediction/probe_rel_error`, `rules/<property>/<E|G|U|
 episode, else 0); text `episodes` (one line per episode); hparams once per run, in the run's own directory.
 Goal trials (train/trials.py), step = trial (1-based): `trials/drops`, `trials/excess_drops` (drops beyond the
 planner's fewest) and text `trials` (one line per trial).
+
+A write that fails in tensorboard's writer thread (a full disk) is raised again by the writer in the caller's next
+write, flush or close, as an OSError naming the log's directory: the runner's one line. The thread's own traceback is
+not printed (`_quiet_writer_threads`).
 """
 
 from __future__ import annotations
 
+import contextlib
+import threading
 from pathlib import Path
 
+from tensorboard.summary.writer.event_file_writer import _AsyncWriterThread
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams
 
@@ -40,18 +47,47 @@ def trial_line(i: int, rec: dict) -> str:
             f"{rec['random_drops_mean']:.2f}, goal {'reached' if rec['goal_reached'] else 'not reached'}")
 
 
+def _quiet_writer_threads(args, _previous=threading.excepthook) -> None:
+    """threading.excepthook: silent for tensorboard's writer thread, whose exception its writer raises again in the
+    writing thread (the runner reports it in one line); every other thread's as before."""
+    if isinstance(args.thread, _AsyncWriterThread) and issubclass(args.exc_type, Exception):
+        return
+    _previous(args)
+
+
+if getattr(threading.excepthook, "__name__", "") != _quiet_writer_threads.__name__:
+    threading.excepthook = _quiet_writer_threads
+
+
 class OrderLog:
     """Writer for one order's run directory. `purge_step` drops events a killed run wrote past its checkpoint."""
 
     def __init__(self, logdir: Path, purge_step: int | None = None):
-        self.writer = SummaryWriter(log_dir=str(logdir), purge_step=purge_step)
+        self.logdir = Path(logdir)
+        with self._named():
+            self.writer = SummaryWriter(log_dir=str(logdir), purge_step=purge_step)
+
+    @contextlib.contextmanager
+    def _named(self):
+        """An OSError without a file name (the writer thread's failed write, raised again here) names the log."""
+        try:
+            yield
+        except OSError as e:
+            if e.filename is None:
+                e.filename = str(self.logdir)
+            raise
 
     def hparams(self, params: dict, metrics: dict) -> None:
         clean = {k: (v if isinstance(v, (int, float, str, bool)) else str(v)) for k, v in params.items()}
-        for summary in hparams(clean, metrics):
-            self.writer.file_writer.add_summary(summary)
+        with self._named():
+            for summary in hparams(clean, metrics):
+                self.writer.file_writer.add_summary(summary)
 
     def episode(self, t: int, rec: dict) -> None:
+        with self._named():
+            self._episode(t, rec)
+
+    def _episode(self, t: int, rec: dict) -> None:
         w, step = self.writer, t + 1
         for p in PROPERTIES:
             w.add_scalar(f"certainty/{p}", rec["knowledge"][p]["certainty"], step)
@@ -65,11 +101,21 @@ class OrderLog:
         w.flush()
 
     def trial(self, i: int, rec: dict) -> None:
+        with self._named():
+            self._trial(i, rec)
+
+    def _trial(self, i: int, rec: dict) -> None:
         w, step = self.writer, i + 1
         w.add_scalar("trials/drops", rec["drops"], step)
         w.add_scalar("trials/excess_drops", rec["excess_drops"], step)
         w.add_text("trials", trial_line(i, rec), step)
         w.flush()
 
+    def image(self, tag: str, image, step: int) -> None:
+        """An (H, W, 3) uint8 image at step."""
+        with self._named():
+            self.writer.add_image(tag, image, step, dataformats="HWC")
+
     def close(self) -> None:
-        self.writer.close()
+        with self._named():
+            self.writer.close()

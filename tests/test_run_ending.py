@@ -1,0 +1,164 @@
+"""How train/run.py ends when it is not left to finish (issue 33): SIGTERM and SIGHUP as Ctrl-C (one line, exit code
+128 + the signal's number, the checkpoint kept), whether the signal reaches the runner alone or its whole process
+group; a SIGKILLed runner leaves no worker behind; a killed physics worker or figure process ends the run in one line
+(exit 1) instead of a wait for ever; a closed stdout runs without console output; a disk that fills under tensorboard's
+writer thread gives one line, not a thread's traceback. Every wait is a subprocess under a timeout."""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+RUN = str(ROOT / "train" / "run.py")
+GOOD = {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420}
+COLOURS = ("blue", "green", "yellow")
+
+
+def objects_file(tmp_path, n: int = 2) -> Path:
+    f = tmp_path / "objects.json"
+    f.write_text(json.dumps({"train": [GOOD] + [{**GOOD, "name": c, "color": c} for c in COLOURS[:n - 1]]}))
+    return f
+
+
+def start(cmd: list[str], until: str) -> subprocess.Popen:
+    """The runner in a session of its own (its own process group), SIGINT, SIGTERM and SIGHUP at their defaults
+    whatever started the tests, read up to the stdout line holding `until`."""
+    p = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: [signal.signal(s, signal.SIG_DFL)
+                                             for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)])
+    while until not in (line := p.stdout.readline()):
+        if not line:
+            p.wait(timeout=60)
+            pytest.fail(f"no {until!r} line: {p.stderr.read()}")
+    return p
+
+
+def children(pid: int) -> list[int]:
+    """The process's children, oldest first (the figure process, started first, then the physics workers)."""
+    kids = []
+    for task in Path(f"/proc/{pid}/task").iterdir():
+        kids += [int(k) for k in (task / "children").read_text().split()]
+    return sorted(kids, key=lambda k: int(Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1].split()[19]))
+
+
+def finish(p: subprocess.Popen) -> str:
+    try:
+        _, err = p.communicate(timeout=90)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+    return err
+
+
+def resumes(cmd: list[str], out: Path, episodes: int) -> None:
+    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stderr
+    assert len(json.loads((out / "summary.json").read_text())["runs"][0]["episodes"]) == episodes
+
+
+@pytest.mark.parametrize("sig, group", [(signal.SIGTERM, False), (signal.SIGTERM, True), (signal.SIGHUP, True),
+                                        (signal.SIGHUP, False)])
+def test_sigterm_and_sighup_end_in_one_line_and_resume_finishes(tmp_path, sig, group):
+    out = tmp_path / "out"
+    cmd = [sys.executable, RUN, "--objects", str(objects_file(tmp_path)), "--orders", "listed", "--out", str(out)]
+    p = start(cmd, "simulating")   # the workers are forked and at work (a drop takes >= 0.15 s)
+    (os.killpg if group else os.kill)(p.pid, sig)
+    err = finish(p)
+    lines = err.strip().splitlines()
+    assert p.returncode == 128 + sig, err
+    assert len(lines) == 1 and f"interrupted by {signal.Signals(sig).name}" in lines[0], err
+    assert "is intact" in lines[0] and "--resume" in lines[0], err
+    resumes(cmd, out, 2)
+
+
+def test_a_sigkilled_runner_leaves_no_worker_printing_or_running(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, RUN, "--objects", str(objects_file(tmp_path)), "--orders", "listed", "--out", str(out)]
+    p = start(cmd, "simulating")
+    kids = children(p.pid)
+    assert kids
+    os.kill(p.pid, signal.SIGKILL)
+    err = finish(p)   # returns once every process holding the stderr pipe (the workers) has exited
+    assert p.returncode == -signal.SIGKILL and err == "", err
+    left = [k for k in kids if Path(f"/proc/{k}").exists() and
+            Path(f"/proc/{k}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"]
+    assert not left
+
+
+@pytest.mark.parametrize("victim", ["physics", "figure"])
+def test_a_killed_worker_or_figure_process_ends_the_run_in_one_line(tmp_path, victim):
+    out = tmp_path / "out"
+    cmd = [sys.executable, RUN, "--objects", str(objects_file(tmp_path, 4)), "--orders", "listed", "--out", str(out),
+           "--physics", "per-episode"]
+    p = start(cmd, "running:")   # per-episode physics: every episode waits on the workers
+    kids = children(p.pid)
+    assert len(kids) >= 2, kids   # the figure process and at least one physics worker
+    pid = kids[0] if victim == "figure" else kids[-1]
+    os.kill(pid, signal.SIGKILL)
+    err = finish(p)
+    lines = err.strip().splitlines()
+    named = "the figure process" if victim == "figure" else "a physics worker"
+    assert p.returncode == 1, err
+    assert len(lines) == 1 and f"{named} (pid {pid}) died (killed by SIGKILL)" in lines[0], err
+    assert "is intact" in lines[0] and "--resume" in lines[0], err
+    resumes(cmd, out, 4)
+
+
+def test_a_pool_whose_idle_process_was_killed_still_ends():
+    # the idle process of the figure's pool holds the task queue's lock while it waits: Pool.terminate, waiting on that
+    # lock, hung for ever once it was killed (and so did a Ctrl-C after it)
+    code = ("import os, signal\n"
+            "from train.drawing import Drawer\n"
+            "d = Drawer()\n"
+            "pid = d.draw('os:getpid').get()\n"
+            "os.kill(pid, signal.SIGKILL)\n"
+            "os.waitpid(pid, 0)\n"
+            "d.close()\n"
+            "print('closed')\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and r.stdout == "closed\n" and r.stderr == "", r.stderr
+
+
+def test_a_closed_stdout_runs_without_console_output(tmp_path):
+    out = tmp_path / "out"
+    cmd = [sys.executable, RUN, "--objects", str(objects_file(tmp_path)), "--orders", "listed", "--out", str(out)]
+    r = subprocess.run(["sh", "-c", 'exec "$@" >&-', "sh", *cmd], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert len(json.loads((out / "summary.json").read_text())["runs"][0]["episodes"]) == 2
+    assert sorted(p.name for p in (out / "checkpoints").iterdir()) == ["latest.pt"]
+
+
+def test_a_full_stdout_ends_in_one_line(tmp_path):
+    cmd = [sys.executable, RUN, "--objects", str(objects_file(tmp_path)), "--orders", "listed",
+           "--out", str(tmp_path / "out")]
+    with open("/dev/full", "w") as full:
+        r = subprocess.run(cmd, stdout=full, stderr=subprocess.PIPE, text=True, timeout=180)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(lines) == 1 and "No space left on device" in lines[0], r.stderr
+
+
+def test_a_disk_full_under_the_tensorboard_writer_ends_in_one_line(tmp_path):
+    # the disk fills when tensorboard's writer thread appends to an event file (its first record, written when the
+    # file is created, goes through): the thread's OSError is raised again in the runner, which says one line
+    out = tmp_path / "out"
+    args = ["--objects", str(objects_file(tmp_path)), "--orders", "listed", "--out", str(out)]
+    code = ("import errno, os, runpy, sys\n"
+            "from tensorboard.compat.tensorflow_stub.io.gfile import LocalFileSystem\n"
+            "def full(self, filename, content, binary_mode=False):\n"
+            "    raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC))\n"
+            "LocalFileSystem.append = full\n"
+            f"sys.argv = [{RUN!r}, *{args!r}]\n"
+            f"runpy.run_path({RUN!r}, run_name='__main__')\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=180)
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 1 and len(lines) == 1, r.stderr
+    assert f"cannot write {out / 'tb'}" in lines[0] and "No space left on device" in lines[0], r.stderr
+    assert "is intact" in lines[0] and "--resume" in lines[0], r.stderr
+    r = subprocess.run([sys.executable, RUN, *args, "--resume"], capture_output=True, text=True, timeout=180)
+    assert r.returncode == 0, r.stderr
