@@ -536,7 +536,9 @@ def _remote_functions():
     def cell_task(cell, objects, world):
         import torch
         torch.set_num_threads(1)
-        return run_cell(cell, objects, world)
+        # the Parquet file's bytes, encoded here on the worker: the driver, which shares the cores with the
+        # workers on a small machine, only writes them (and Ray moves a few kB instead of the rows)
+        return encode_cell(run_cell(cell, objects, world))
 
     return world_task, cell_task
 
@@ -561,12 +563,18 @@ def write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def write_cell(out: Path, cid: str, table) -> None:
+def encode_cell(table) -> bytes:
+    """A cell's rows as the bytes of its Parquet file (zstd)."""
     import pyarrow as pa
     import pyarrow.parquet as pq
     buf = pa.BufferOutputStream()
     pq.write_table(table, buf, compression="zstd")
-    write_atomic(out / "cells" / f"{cid}.parquet", buf.getvalue().to_pybytes())
+    return buf.getvalue().to_pybytes()
+
+
+def write_cell(out: Path, cid: str, table) -> None:
+    """A cell's rows (a Table, or encode_cell's bytes) to DIR/cells/<cid>.parquet, atomically."""
+    write_atomic(out / "cells" / f"{cid}.parquet", table if isinstance(table, bytes) else encode_cell(table))
 
 
 def read_cells(out: Path):
@@ -755,14 +763,14 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
             for ref in done:
                 c = pending.pop(ref)
                 try:
-                    table = ray.get(ref)
+                    data = ray.get(ref)
                 except ray.exceptions.RayError as e:
                     cause = getattr(e, "cause", None) or e
                     why = (str(cause).strip().splitlines() or [type(cause).__name__])[-1]
                     failed.append((c, why))
                     progress.write(f"{PROG}: cell {c['id']} ({_describe(c)}) failed: {why}")
                     continue
-                write_cell(out, c["id"], table)
+                write_cell(out, c["id"], data)
                 progress.update()
                 if on_cell is not None:
                     on_cell(c)
