@@ -4,9 +4,11 @@ one-sided binomial test (p < 0.05 = pass; chance = 1 / number of options).
 
 The agent perceives the apparatus as it perceives an object: each option's tube enters the measurement as context
 properties (EncoderConfig.context, each a SOM map of its own), so its episodes hold the substrate's look, the
-tube's width, its level and its place, and recall is cued by them as by the object's own properties. Nothing here
-tells the agent which option works: it predicts each option's outcome by recall, chooses the largest, acts (the
-closed form `sim.apparatus.outcome` is the world), observes the rise of the reward tube and learns (Agent.step).
+tube's width, its level and its place, recall is cued by them as by the object's own properties, and the same four
+rules judge them by the same comparisons (AgentConfig.properties), their pathway strengths gating recall as the
+object's do. Nothing here tells the agent which option works: it predicts each option's outcome by recall, chooses
+the largest, acts (the closed form `sim.apparatus.outcome` is the world), observes the rise of the reward tube and
+learns (Agent.step).
 """
 
 from __future__ import annotations
@@ -155,7 +157,7 @@ def perceived(task, tube, obj) -> dict:
     return m
 
 
-def task_world(task, outcome=None):
+def task_world(task, outcome=None, perceive=None):
     """(options, world(i), correct) of a task: every option from the task's starting levels (each trial is set up
     afresh, as in the studies), correct = the options that bring the reward in reach (else those that raise it most)."""
     if outcome is None:
@@ -168,18 +170,19 @@ def task_world(task, outcome=None):
     named = set(map(tuple, getattr(task, "correct", ()) or ()))
     correct = ({i for i, (t, o) in enumerate(opts) if (t.name, o.name) in named} or
                {i for i, r in enumerate(reached) if r} or {i for i, r in enumerate(rises) if r == max(rises)})
-    options = [perceived(task, tube, obj) for tube, obj in opts]
+    options = [(perceive or perceived)(task, tube, obj) for tube, obj in opts]
     return options, (lambda i: (rises[i], reached[i])), correct, opts
 
 
 def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = (), trials: int = TRIALS,
-             outcome=None) -> dict:
+             outcome=None, perceive=None) -> dict:
     """Agents over seeds x orders on one task. Exploration: the task file's train objects dropped into every open tube,
     in a random order per agent (as the runner explores its train objects), then the trials. outcome: the world
-    (default sim.apparatus.outcome)."""
+    (default sim.apparatus.outcome); perceive(task, tube, obj): an option's measurement (default `perceived`, from
+    the task file; train/task_run.py's, from the camera)."""
     if outcome is None:
         from sim.apparatus import outcome
-    options, world, correct, opts = task_world(task, outcome)
+    options, world, correct, opts = task_world(task, outcome, perceive)
     train = list(getattr(task, "train", ()))
     right, choices = [], []
     for s in seeds:
@@ -187,7 +190,7 @@ def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = ()
                               orders)
         explore_opts = [(tube, obj) for obj in train for tube in task.tubes if getattr(tube, "open", True)]
         levels = {t.name: t.level_cm for t in task.tubes}
-        ex = [perceived(task, tube, obj) for tube, obj in explore_opts]
+        ex = [(perceive or perceived)(task, tube, obj) for tube, obj in explore_opts]
         ex_out = [outcome(task, dict(levels), tube, obj) for tube, obj in explore_opts]
         all_opts = options + ex
         full_world = lambda i: world(i) if i < len(options) else (float(ex_out[i - len(options)]["reward_rise_cm"]),
