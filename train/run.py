@@ -666,6 +666,8 @@ def _main(argv=None) -> int:
     try:
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
+            if args.objects is not None and _is_task_file(args.objects):
+                return run_task(args)
             objects = load_run_objects(args)
             n_orders = count_orders(len(objects.train), args.orders)
             check_out(args.out, args.resume)
@@ -700,6 +702,49 @@ def _main(argv=None) -> int:
             _close_quietly()
             print(f"{_fresh_line()}train/run.py: interrupted{by} before the run started", file=sys.stderr)
         return code
+
+
+def _is_task_file(path: Path) -> bool:
+    from train.task_run import is_task_file
+    return is_task_file(path)
+
+
+def run_task(args) -> int:
+    """--objects is a task file of the Aesop battery (sim/tasks/): --orders N agents of --seed explore and play it in
+    the apparatus built in pybullet (train/task_run.py). It has no checkpoints: an interrupted task run starts again."""
+    given = [flag for flag, on in (("--resume", args.resume), ("--config/--set", args.overrides.keys() -
+                                                                     {"model", "ablate", "seed"}),
+                                   ("--gui", args.gui), ("--physics per-episode", args.physics != "cached")) if on]
+    if given:
+        raise UsageError(f"{args.objects} is a task file: {given[0]} does not apply to a task run (it takes --orders "
+                         f"N agents, --seed, --model, --ablate, --frames and --out)")
+    if not args.orders.isdigit():
+        raise UsageError(f"{args.objects} is a task file: --orders takes a number of agents, not {args.orders!r}")
+    from sim.apparatus import TaskFileError, load_task
+    try:
+        task = load_task(args.objects)
+    except TaskFileError as e:
+        raise UsageError(f"{args.objects}: {e}") from None
+    check_out(args.out, False)
+    print(f"train/run.py: task {task.name}: {args.orders} agent(s) of model {args.model}, seed {args.seed}, "
+          f"physics in pybullet -> {args.out}", flush=True)
+    lock = lock_out(args.out)
+    try:
+        from train.task_run import run_task_file
+        try:
+            run_task_file(task, args.out, args.model, args.seed, int(args.orders), tuple(args.ablate), args.frames)
+        except OSError as e:
+            print(f"{_fresh_line()}train/run.py: error: {_os_error(e)}", file=sys.stderr)
+            return 1
+        except KeyboardInterrupt as e:
+            by, code = _how(e)
+            print(f"{_fresh_line()}train/run.py: interrupted{by}; a task run keeps no checkpoint: run it again "
+                  f"(with another --out, or remove {args.out})", file=sys.stderr)
+            return code
+        print(f"train/run.py: wrote {args.out}/summary.json, tb/" + (", frames/" if args.frames else ""))
+        return 0
+    finally:
+        os.close(lock)
 
 
 @contextlib.contextmanager
