@@ -1,15 +1,16 @@
 """The Aesop battery: does the agent learn the animal studies' apparatus tasks from its own episodes?
 
     python benches/battery.py [--seeds 2] [--orders 4] [--first-seed 0] [--trials 20] [--tasks T ...]
-                              [--ablate rules] [--out DIR] [--record]
+                              [--ablate rules] [--aim gap|rise] [--out DIR] [--record]
 
 Per task (sim/tasks/<task>.json, read by sim.apparatus.load_task): for each seed and each of `--orders` exploration
 orders an agent (each model: paper, extended) drops the task's train objects into every tube, then plays `--trials`
-trials: it predicts each (tube, object) option's outcome by recall, chooses the largest, acts (sim.apparatus.outcome
-as the world), observes the reward tube's rise and learns (train/battery.py). Every agent is a subject; choices are
-pooled per window (trial 1, 1-5, 1-20) and tested against chance (1 / options) with an exact one-sided binomial
-test: p < 0.05 over trials 1-20 = passed. Beside it, the published results with their citations ("n/a (not
-found)" where a figure could not be read on this machine). A PNG of learning curves per task goes to --out.
+trials: it predicts each (tube, object) option's outcome by recall, chooses the one whose predicted rise leaves the
+reward least short of reach (--aim gap; --aim rise: the largest rise), acts (sim.apparatus.outcome as the world),
+observes the reward tube's rise and learns (train/battery.py). Every agent is a subject; choices are pooled per
+window (trial 1, 1-5, 1-20) and tested against chance (1 / options) with an exact one-sided binomial test:
+p < 0.05 over trials 1-20 = passed. Beside it, the published results with their citations ("n/a (not found)"
+where a figure could not be read on this machine). A PNG of learning curves per task goes to --out.
 Nothing was tuned on these seeds. Last line: `tasks_passed_paper=N/8 tasks_passed_extended=N/8 crows=4/6`.
 """
 
@@ -83,6 +84,9 @@ def main(argv=None) -> None:
     ap.add_argument("--trials", type=at_least(5), default=20, help="trials per subject (the studies: 20)")
     ap.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run (default all 8)")
     ap.add_argument("--ablate", choices=["rules"], action="append", default=[], help="switch the rules off")
+    ap.add_argument("--aim", choices=("gap", "rise"), default="gap",
+                    help="what a choice aims at: gap (the predicted rise against how far below reach the reward is "
+                         "seen) or rise (the largest predicted rise, the gap unseen: its ablation)")
     ap.add_argument("--out", type=Path, default=Path("/tmp/battery"), help="where the learning curves' PNG goes")
     record_flag(ap)
     a = ap.parse_args(argv)
@@ -102,11 +106,11 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     ablate = tuple(a.ablate)
-    results = {t: {m: run_task(task, m, seeds, a.orders, ablate, a.trials) for m in MODELS}
+    results = {t: {m: run_task(task, m, seeds, a.orders, ablate, a.trials, aim=a.aim) for m in MODELS}
                for t, task in tasks.items()}
     print(f"Aesop battery: {a.seeds} seeds x {a.orders} orders = {a.seeds * a.orders} subjects per model, "
-          f"{a.trials} trials each{', rules off' if ablate else ''}; pooled over subjects, exact one-sided binomial "
-          f"test against chance, p < 0.05 over trials 1-{a.trials} = passed")
+          f"{a.trials} trials each{', rules off' if ablate else ''}, aiming at the {a.aim}; pooled over subjects, "
+          f"exact one-sided binomial test against chance, p < 0.05 over trials 1-{a.trials} = passed")
     head = f"{'task':<21}{'chance':>7}  " + "  ".join(
         f"{m + ': result':>16}{'t1 %':>6}{'1-5 %':>7}{'1-20 %':>7}{'p':>9}{'subj.':>6}" for m in MODELS)
     print(head)

@@ -86,3 +86,24 @@ def test_bench_help():
 def test_score_of_fewer_trials_counts_what_was_played():
     s = score([[True] * 10, [False] * 10], 0.5)["1-20"]
     assert (s.correct, s.n) == (10, 20)
+
+
+def test_a_choice_aims_at_the_rewards_gap_and_equal_gaps_choose_as_the_rise():
+    """Two tubes alike but for their level: each option raises its own reward 1.8 cm; only the high tube's (seen
+    1.5 cm below reach, the low one's 5 cm) comes in reach. The predicted rises tie, so aiming at the gap chooses
+    the high tube on every trial (the oracle: 18 - 10 x 0 > 18 - 10 x 3.5); aiming at the rise is left to the
+    tie-break. With the gaps equal the two aims make the same choices."""
+    obj = {"rgb": [0.5, 0.5, 0.5], "extent_cm": [3.0, 3.0, 5.0], "fill": 0.785, "mass_g": 100.0}
+    ctx = lambda level, place: {"surface": 0.15, "width": 0.3, "level": level, "place": place}
+    options = [dict(obj, context=ctx(0.775, 0.0), gap_cm=1.5), dict(obj, context=ctx(0.6, 1.0), gap_cm=5.0)]
+    world = lambda i: (1.8, i == 0)
+    explore = [[0, 1], [1, 0]]
+    agent = context_agent(_small("paper"), 2)
+    right, chosen = play(agent, options, world, {0}, explore, trials=4, seed=1, aim="gap")
+    assert chosen == [[0] * 4, [0] * 4] and right == [[True] * 4] * 2
+    same = [dict(o, gap_cm=2.0) for o in options]
+    runs = [play(context_agent(_small("paper"), 2), same, world, {0}, explore, trials=4, seed=1, aim=aim)
+            for aim in ("gap", "rise")]
+    assert runs[0] == runs[1]
+    with pytest.raises(ValueError, match="aim"):
+        play(agent, options, world, {0}, explore, trials=1, aim="nearest")

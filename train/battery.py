@@ -32,6 +32,7 @@ WIDTH_RANGE_CM = (1.0, 30.0)      # as the size map's range: tubes from a finger
 REWARD_SCALE = 10.0               # the reward tube's rise in mm as the reward the memory stores (its code is log-scaled
                                   # from 0.5, so a rise of 0.05 cm is the smallest that registers)
 TRIALS = 20
+AIMS = ("gap", "rise")   # what a choice aims at (play's aim)
 
 
 def binomial_tail(k: int, n: int, p: float) -> float:
@@ -106,13 +107,18 @@ def stack(ms: list[dict]) -> dict:
 
 
 def play(agent: Agent, options: list[dict], world, correct: set, explore: list[list[int]], trials: int = TRIALS,
-         seed: int = 0, offered: int | None = None) -> tuple[list[list[bool]], list[list[int]]]:
+         seed: int = 0, offered: int | None = None, aim: str = "gap") -> tuple[list[list[bool]], list[list[int]]]:
     """The agent's B agents explore, then play `trials` trials, learning all the while.
 
     options: per option its measurement (an object's, with "context"). world(i) -> (rise_cm, reached) of option i
     from the trial's starting state. correct: the options that count as correct. explore: per agent the options it
     tries first, in order (the same length for all). offered: the first `offered` options are the trials'
-    choices (default all; the rest are exploration's only). Returns (per agent per trial correct, per agent choices)."""
+    choices (default all; the rest are exploration's only). aim: "gap" (default) chooses the option whose predicted
+    rise leaves its reward the least short of reach (an option's "gap_cm": how far below reach the reward it raises
+    is seen, as the runner's goal trials aim at the ball's gap); "rise" the largest predicted rise, the gap unseen.
+    With equal gaps the two choose alike. Returns (per agent per trial correct, per agent choices)."""
+    if aim not in AIMS:
+        raise ValueError(f"aim must be one of {AIMS}, got {aim!r}")
     B = agent.batch
     rng = random.Random(seed)
     offered = len(options) if offered is None else offered
@@ -127,8 +133,13 @@ def play(agent: Agent, options: list[dict], world, correct: set, explore: list[l
         act([explore[b][step] for b in range(B)])
     right = [[] for _ in range(B)]
     chosen_all = [[] for _ in range(B)]
+    gaps = [options[i].get("gap_cm", 0.0) if aim == "gap" else 0.0 for i in range(offered)]
+    # the predicted margin over the closest gap, in the stored reward's unit: exactly the predicted rise when the
+    # gaps are equal (no rounding), so only a difference in what is seen of the rewards changes the choice
+    shortfall = torch.tensor([REWARD_SCALE * (g - min(gaps)) if g != min(gaps) else 0.0 for g in gaps])
     for _ in range(trials):
         expected = torch.stack([agent.predict(stack([options[i]] * B)) for i in range(offered)], 1)   # (B, offered)
+        expected = expected - shortfall
         chosen = []
         for b in range(B):
             e = expected[b].tolist()
@@ -144,9 +155,18 @@ def play(agent: Agent, options: list[dict], world, correct: set, explore: list[l
 
 
 # -- the apparatus tasks (sim/apparatus.py) ------------------------------------------------------------------------
+def reward_gap_cm(task, tube, levels: dict) -> float:
+    """How far below reach the reward an option raises is seen: the dropped-into tube's own reward, or else the
+    apparatus' reward closest to reach (which tube a hidden channel joins is not seen)."""
+    rewards = [tube] if tube.reward else [t for t in task.tubes if t.reward]
+    return min(t.height_cm - task.reach_cm - levels[t.name] for t in rewards)
+
+
 def perceived(task, tube, obj) -> dict:
-    """A (tube, object) option as the agent perceives it: the object's measurement and the tube's context."""
+    """A (tube, object) option as the agent perceives it: the object's measurement, the tube's context and the gap
+    of the reward it raises (reward_gap_cm, for the choice)."""
     m = dict(obj.exact_measurement())
+    m["gap_cm"] = reward_gap_cm(task, tube, task.start_levels())
     names = [t.name for t in task.tubes]
     lo, hi = WIDTH_RANGE_CM
     d = min(max(tube.inner_diameter_cm, lo), hi)
@@ -175,11 +195,11 @@ def task_world(task, outcome=None, perceive=None):
 
 
 def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = (), trials: int = TRIALS,
-             outcome=None, perceive=None) -> dict:
+             outcome=None, perceive=None, aim: str = "gap") -> dict:
     """Agents over seeds x orders on one task. Exploration: the task file's train objects dropped into every open tube,
     in a random order per agent (as the runner explores its train objects), then the trials. outcome: the world
     (default sim.apparatus.outcome); perceive(task, tube, obj): an option's measurement (default `perceived`, from
-    the task file; train/task_run.py's, from the camera)."""
+    the task file; train/task_run.py's, from the camera); aim: what a choice aims at (play)."""
     if outcome is None:
         from sim.apparatus import outcome
     options, world, correct, opts = task_world(task, outcome, perceive)
@@ -201,7 +221,7 @@ def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = ()
             order = list(range(len(options), len(all_opts)))
             rng.shuffle(order)
             explore.append(order)
-        r, c = play(agent, all_opts, full_world, correct, explore, trials, seed=s, offered=len(options))
+        r, c = play(agent, all_opts, full_world, correct, explore, trials, seed=s, offered=len(options), aim=aim)
         right += r
         choices += c
     return {"right": right, "choices": choices, "chance": 1.0 / len(options), "scores": score(right, 1 / len(options)),

@@ -72,7 +72,9 @@ class PhysicsWorld:
     def measurement(self, task, tube, obj) -> dict:
         """An option as the agent perceives it: the object's measurement and the tube's context from the camera."""
         from train.battery import WIDTH_RANGE_CM
+        from train.battery import reward_gap_cm
         m = dict(obj.exact_measurement())
+        m["gap_cm"] = reward_gap_cm(task, tube, {k: v["level_cm"] for k, v in self.seen.items()})
         s = self.seen[tube.name]
         lo, hi = WIDTH_RANGE_CM
         d = min(max(s["width_cm"], lo), hi)
