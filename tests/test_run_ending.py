@@ -118,7 +118,10 @@ def test_a_pool_whose_idle_process_was_killed_still_ends():
             "d = Drawer()\n"
             "pid = d.draw('os:getpid').get()\n"
             "os.kill(pid, signal.SIGKILL)\n"
-            "os.waitpid(pid, 0)\n"
+            "try:\n"
+            "    os.waitpid(pid, 0)\n"
+            "except ChildProcessError:\n"   # the pool's thread reaped it first
+            "    pass\n"
             "d.close()\n"
             "print('closed')\n")
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60)
@@ -162,3 +165,24 @@ def test_a_disk_full_under_the_tensorboard_writer_ends_in_one_line(tmp_path):
     assert "is intact" in lines[0] and "--resume" in lines[0], r.stderr
     r = subprocess.run([sys.executable, RUN, *args, "--resume"], capture_output=True, text=True, timeout=180)
     assert r.returncode == 0, r.stderr
+
+
+def test_a_pool_whose_dead_process_the_pool_thread_saw_still_ends():
+    # end_pool kills the processes; the pool's thread, seeing one dead before terminate() stops it, puts a stand-in
+    # (never a new process) in its place, which Pool.join then waited on: AttributeError, the tests' pool closed badly
+    import time
+
+    from train.physics import QuietPool, end_pool, quiet_pool
+    pool = quiet_pool(2, None, what="a test worker")
+    try:
+        victim = pool.processes[0]
+        victim.kill()
+        victim.join()
+        deadline = time.monotonic() + 10
+        while all(isinstance(p, type(victim)) for p in pool._pool) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not all(isinstance(p, type(victim)) for p in pool._pool), "the pool's thread never saw the death"
+        assert isinstance(pool, QuietPool) and len(pool._pool) == 2
+    finally:
+        end_pool(pool)
+    assert all(p.exitcode is not None for p in pool.processes)

@@ -139,6 +139,12 @@ class _NotReplaced:
     def terminate(self):
         pass
 
+    def kill(self):
+        pass
+
+    def join(self, timeout=None):   # Pool.join waits on every entry of its list, stand-ins included
+        pass
+
     def is_alive(self) -> bool:
         return False
 
