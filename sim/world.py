@@ -88,10 +88,42 @@ class WorldConfig:
     level_noise_cm: float = 0.0
 
 
+# Opens the X display named by DISPLAY in a child process: exit 0 it opened, 3 no libX11, 4 no X server answered.
+_X_PROBE = """
+import ctypes, ctypes.util, sys
+try:
+    x = ctypes.CDLL("libX11.so.6")
+except OSError:
+    try:
+        x = ctypes.CDLL(ctypes.util.find_library("X11") or "libX11.so")
+    except OSError:
+        sys.exit(3)
+x.XOpenDisplay.restype = ctypes.c_void_p
+x.XOpenDisplay.argtypes = [ctypes.c_char_p]
+sys.exit(0 if x.XOpenDisplay(None) else 4)
+"""
+X_PROBE_TIMEOUT_S = 10.0   # a local X server answers in milliseconds; a remote one that never answers must not hang
+
+
 def gui_unavailable() -> str | None:
-    """Why pybullet's GUI cannot open here, or None. Without an X display pybullet does not fail: it hangs."""
-    if sys.platform.startswith("linux") and not os.environ.get("DISPLAY"):
-        return "the pybullet GUI needs an X display and DISPLAY is not set (without --gui the world runs headless)"
+    """Why pybullet's GUI cannot open here, or None. Without an X server pybullet does not fail: it hangs, deaf to
+    Ctrl-C, so the display is opened first in a child process that a timeout can end."""
+    if not sys.platform.startswith("linux"):
+        return None
+    display = os.environ.get("DISPLAY")
+    headless = "(without --gui the world runs headless)"
+    if not display:
+        return f"the pybullet GUI needs an X display and DISPLAY is not set {headless}"
+    import subprocess
+    try:
+        code = subprocess.run([sys.executable, "-c", _X_PROBE], stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                              stderr=subprocess.DEVNULL, timeout=X_PROBE_TIMEOUT_S).returncode
+    except subprocess.TimeoutExpired:
+        return f"the X server of DISPLAY={display!r} did not answer within {X_PROBE_TIMEOUT_S:g} s {headless}"
+    if code == 3:
+        return f"the pybullet GUI needs libX11, which this machine does not have {headless}"
+    if code != 0:
+        return f"no X server answers at DISPLAY={display!r} {headless}"
     return None
 
 

@@ -106,6 +106,18 @@ def test_gui_without_a_display_is_refused_instead_of_hanging(tmp_path, monkeypat
     assert not (tmp_path / "o").exists()
 
 
+def test_gui_with_a_display_no_x_server_answers_is_refused_instead_of_hanging(tmp_path, monkeypatch):
+    # DISPLAY set, nobody listening: pybullet printed "cannot connect to X server" and hung, deaf to SIGTERM
+    display = ":4917"
+    assert not Path(f"/tmp/.X11-unix/X{display[1:]}").exists()
+    monkeypatch.setenv("DISPLAY", display)
+    r = run("--gui", "--out", str(tmp_path / "o"))
+    lines = r.stderr.strip().splitlines()
+    assert r.returncode == 2 and len(lines) == 1 and lines[0].startswith("train/run.py: error: --gui:"), r.stderr
+    assert "':4917'" in r.stderr or "libX11" in r.stderr, r.stderr
+    assert not (tmp_path / "o").exists()
+
+
 # -- bounds on the objects file: every one refused in one line, before anything is read without bound -----------------
 
 def test_huge_integer_is_refused(tmp_path):

@@ -145,6 +145,12 @@ def test_gui_without_a_display_raises_a_clear_error(monkeypatch):
         World(load_objects(DEFAULT_OBJECTS_FILE), gui=True)
 
 
+def test_gui_with_no_x_server_behind_display_raises_instead_of_hanging(monkeypatch):
+    monkeypatch.setenv("DISPLAY", ":4917")
+    with pytest.raises(RuntimeError, match="no X server answers at DISPLAY=':4917'|libX11"):
+        World(load_objects(DEFAULT_OBJECTS_FILE), gui=True)
+
+
 def _state(world) -> tuple:
     """Everything the next episode starts from: bodies, their poses and velocities, the arm, the water."""
     cl = world.client
