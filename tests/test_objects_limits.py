@@ -50,7 +50,7 @@ def test_as_many_objects_as_the_file_allows_are_admitted():
 
 
 @pytest.mark.parametrize("sets, words", [
-    ([], "memory.max_episodes = 230 and memory.when_full = refuse"),            # the default memory refuses
+    ([], "memory.max_episodes = 230 and memory.when_full = refuse, hub.max_assemblies = 230"),  # the defaults: both
     (["memory.when_full=forget_oldest"], "hub.max_assemblies = 230 and hub.when_full = refuse"),
     (["memory.when_full=forget_weakest", "hub.max_assemblies=100", "hub.when_full=refuse"], "hub.max_assemblies = 100"),
 ])
@@ -71,7 +71,11 @@ def test_check_capacity_counts_train_objects_against_a_refusing_memory_and_hub()
     from aesop_torch.agent import AgentConfig
     from train.run import check_capacity
     cfg = AgentConfig()
-    assert check_capacity(cfg, 230) is None and "memory.max_episodes = 230" in check_capacity(cfg, 231)
+    assert check_capacity(cfg, 230) is None
+    both = check_capacity(cfg, 231)   # both refuse: one line names both, and the fix for both
+    assert "memory.max_episodes = 230 and memory.when_full = refuse, hub.max_assemblies = 230" in both, both
+    assert "--set memory.when_full=forget_oldest --set hub.when_full=forget_oldest" in both, both
+    assert "--set memory.max_episodes=231 --set hub.max_assemblies=231" in both, both
     cfg.memory.when_full = "forget_oldest"
     assert "hub.max_assemblies = 230" in check_capacity(cfg, 231)
     cfg.hub.when_full = "forget_weakest"

@@ -353,14 +353,16 @@ def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}
     is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
     a copy with room for theirs (train/trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
     differs)."""
-    for part, size_key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
-        c = getattr(agent, part)
-        size = getattr(c, size_key)
-        if c.when_full == "refuse" and n_train > size:
-            return (f"{n_train} train objects but {part}.{size_key} = {size} and {part}.when_full = refuse: the run "
-                    f"would stop at episode {size + 1}; {setting(part + '.when_full', 'forget_oldest')} (or "
-                    f"forget_weakest) or {setting(part + '.' + size_key, n_train)}")
-    return None
+    full = [(part, key, getattr(getattr(agent, part), key)) for part, key in
+            (("memory", "max_episodes"), ("hub", "max_assemblies"))
+            if getattr(agent, part).when_full == "refuse" and n_train > getattr(getattr(agent, part), key)]
+    if not full:
+        return None
+    sizes = ", ".join(f"{part}.{key} = {size} and {part}.when_full = refuse" for part, key, size in full)
+    forget = " ".join(setting(f"{part}.when_full", "forget_oldest") for part, _, _ in full)
+    grow = " ".join(setting(f"{part}.{key}", n_train) for part, key, _ in full)
+    return (f"{n_train} train objects but {sizes}: the run would stop at episode "
+            f"{min(size for _, _, size in full) + 1}; {forget} (or forget_weakest), or {grow}")
 
 
 def _origin(origins: dict, key: str | None) -> str:
