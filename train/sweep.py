@@ -734,7 +734,7 @@ def _reachable(address: str, timeout: float = 10.0) -> None:
 
 def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -> list[tuple[dict, str]]:
     """Run the cells on Ray (initialised), writing each as it finishes; the failures as (cell, one-line reason).
-    A few cells per CPU are handed to Ray at a time (the rest wait here: a Ctrl-C has little to cancel, and a
+    A few cells per CPU are handed to Ray at a time (the rest wait here: a Ctrl-C leaves little running, and a
     million-cell sweep does not sit in Ray's queues). on_cell(cell): called after each cell is written (tests)."""
     import ray
     world_task, cell_task = _remote_functions()
@@ -753,33 +753,29 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
     queue = list(reversed(cells))   # popped from the end: in the given order
     pending: dict = {}
     failed = []
-    try:
-        while queue or pending:
-            while queue and len(pending) < window:
-                c = queue.pop()
-                pending[submit(c)] = c
-            # a timeout, so Python sees a Ctrl-C: a wait without one blocks in Ray's C++ and never returns to it
-            done, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
-            for ref in done:
-                c = pending.pop(ref)
-                try:
-                    data = ray.get(ref)
-                except ray.exceptions.RayError as e:
-                    cause = getattr(e, "cause", None) or e
-                    why = (str(cause).strip().splitlines() or [type(cause).__name__])[-1]
-                    failed.append((c, why))
-                    progress.write(f"{PROG}: cell {c['id']} ({_describe(c)}) failed: {why}")
-                    continue
-                write_cell(out, c["id"], data)
-                progress.update()
-                if on_cell is not None:
-                    on_cell(c)
-    finally:
-        for ref in list(pending) + list(worlds.values()):
+    # Nothing is cancelled on the way out (Ctrl-C, an error): the driver's end (ray.shutdown, or its exit) ends its
+    # tasks, locally and on a cluster; ray.cancel then the reply of a cell already done aborted Ray's core worker
+    # ("Tried to complete task that was not pending"), exit 1 and a C++ stack trace instead of the one line.
+    while queue or pending:
+        while queue and len(pending) < window:
+            c = queue.pop()
+            pending[submit(c)] = c
+        # a timeout, so Python sees a Ctrl-C: a wait without one blocks in Ray's C++ and never returns to it
+        done, _ = ray.wait(list(pending), num_returns=1, timeout=0.5)
+        for ref in done:
+            c = pending.pop(ref)
             try:
-                ray.cancel(ref)
-            except Exception:   # noqa: BLE001  finished already, or Ray torn down by the same Ctrl-C
-                pass
+                data = ray.get(ref)
+            except ray.exceptions.RayError as e:
+                cause = getattr(e, "cause", None) or e
+                why = (str(cause).strip().splitlines() or [type(cause).__name__])[-1]
+                failed.append((c, why))
+                progress.write(f"{PROG}: cell {c['id']} ({_describe(c)}) failed: {why}")
+                continue
+            write_cell(out, c["id"], data)
+            progress.update()
+            if on_cell is not None:
+                on_cell(c)
     return failed
 
 
