@@ -1,7 +1,7 @@
 """The Aesop battery: does the agent learn the animal studies' apparatus tasks from its own episodes?
 
     python benches/battery.py [--seeds 2] [--orders 4] [--first-seed 0] [--trials 20] [--tasks T ...]
-                              [--ablate rules] [--aim gap|rise] [--out DIR] [--record]
+                              [--ablate rules|prior] [--aim gap|rise] [--out DIR] [--record]
 
 Per task (sim/tasks/<task>.json, read by sim.apparatus.load_task): for each seed and each of `--orders` exploration
 orders an agent (each model: paper, extended) drops the task's train objects into every tube, then plays `--trials`
@@ -83,7 +83,9 @@ def main(argv=None) -> None:
     ap.add_argument("--first-seed", type=seed, default=0)
     ap.add_argument("--trials", type=at_least(5), default=20, help="trials per subject (the studies: 20)")
     ap.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run (default all 8)")
-    ap.add_argument("--ablate", choices=["rules"], action="append", default=[], help="switch the rules off")
+    ap.add_argument("--ablate", choices=["rules", "prior"], action="append", default=[],
+                    help="switch a part off (repeatable): rules (no rule fires), prior (the extended model's readout "
+                         "without its physics priors; the paper model has none and runs as it is)")
     ap.add_argument("--aim", choices=("gap", "rise"), default="gap",
                     help="what a choice aims at: gap (the predicted rise against how far below reach the reward is "
                          "seen) or rise (the largest predicted rise, the gap unseen: its ablation)")
@@ -106,10 +108,15 @@ def main(argv=None) -> None:
     t0 = time.perf_counter()
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     ablate = tuple(a.ablate)
-    results = {t: {m: run_task(task, m, seeds, a.orders, ablate, a.trials, aim=a.aim) for m in MODELS}
+
+    def ablated(model):   # the prior is the extended model's alone
+        return tuple(x for x in ablate if x != "prior" or model == "extended")
+
+    results = {t: {m: run_task(task, m, seeds, a.orders, ablated(m), a.trials, aim=a.aim) for m in MODELS}
                for t, task in tasks.items()}
+    off = "".join(f", {x} off" + (" (extended)" if x == "prior" else "") for x in dict.fromkeys(ablate))
     print(f"Aesop battery: {a.seeds} seeds x {a.orders} orders = {a.seeds * a.orders} subjects per model, "
-          f"{a.trials} trials each{', rules off' if ablate else ''}, aiming at the {a.aim}; pooled over subjects, "
+          f"{a.trials} trials each{off}, aiming at the {a.aim}; pooled over subjects, "
           f"exact one-sided binomial test against chance, p < 0.05 over trials 1-{a.trials} = passed")
     head = f"{'task':<21}{'chance':>7}  " + "  ".join(
         f"{m + ': result':>16}{'t1 %':>6}{'1-5 %':>7}{'1-20 %':>7}{'p':>9}{'subj.':>6}" for m in MODELS)

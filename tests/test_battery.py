@@ -107,3 +107,21 @@ def test_a_choice_aims_at_the_rewards_gap_and_equal_gaps_choose_as_the_rise():
     assert runs[0] == runs[1]
     with pytest.raises(ValueError, match="aim"):
         play(agent, options, world, {0}, explore, trials=1, aim="nearest")
+
+
+def test_bench_ablates_the_prior_in_the_extended_model_alone(tmp_path):
+    """--ablate prior switches the extended model's priors off; the paper model has none and plays as without it."""
+    def bench(*extra):
+        r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--seeds", "1", "--orders", "1",
+                            "--trials", "5", "--tasks", "solid_vs_hollow", "--out", str(tmp_path), *extra],
+                           capture_output=True, text=True, cwd=ROOT, timeout=300)
+        assert r.returncode == 0, r.stderr
+        lines = r.stdout.splitlines()
+        row = next(line for line in lines if line.startswith("solid_vs_hollow")).split()
+        return lines[0], row[2:8], row[8:]   # the header, the paper model's columns, the extended model's
+
+    head, paper, extended = bench()
+    head_off, paper_off, extended_off = bench("--ablate", "prior")
+    assert "prior off (extended)" in head_off and "prior" not in head
+    assert paper_off == paper                      # the paper model ran as it is
+    assert extended_off != extended, (extended, extended_off)   # the extended model without its priors chose otherwise
