@@ -353,9 +353,11 @@ def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}
     is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
     a copy with room for theirs (train/trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
     differs)."""
-    full = [(part, key, getattr(getattr(agent, part), key)) for part, key in
-            (("memory", "max_episodes"), ("hub", "max_assemblies"))
-            if getattr(agent, part).when_full == "refuse" and n_train > getattr(getattr(agent, part), key)]
+    full = []   # (part, its size's key, the size) of each part that would refuse
+    for part, key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
+        c = getattr(agent, part)
+        if c.when_full == "refuse" and n_train > getattr(c, key):
+            full.append((part, key, getattr(c, key)))
     if not full:
         return None
     sizes = ", ".join(f"{part}.{key} = {size} and {part}.when_full = refuse" for part, key, size in full)
