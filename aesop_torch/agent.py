@@ -55,10 +55,12 @@ from .encoders import (FUNCTION_WORDS, GOAL_WORDS, VOCABULARY, WORD_MAP, Sensory
                        default_map_configs, encode_words, train_property_maps, unknown_words, word_activity)
 from .fitted_readout import EXTENSIVE, FEATURE_COLUMNS, as_volume, feature_columns
 from .hub import ActionHub, BodyHub, ObjectHub, RewardCode, _relative
+from .contextual_rules import FATE, ContextualRules
 from .incremental_rules import IncrementalRules
+from .local_readout import local_readout
 from .memory import EpisodicMemory
 from .readouts import recall_average
-from .rules import ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules
+from .rules import DOMINANT, ELIMINATION, GROWTH, STATUS_QUO, UNCERTAINTY, CausalRules
 from .som import SelfOrganizingMap
 
 # re-exported: the names other modules import from here (the config, the sheet's layout, the readout's features)
@@ -160,10 +162,11 @@ class Agent(nn.Module):
         self.actions, self.body, self.reward = ActionHub(), BodyHub(), RewardCode()
 
     def _new_rules(self, batch: int) -> nn.Module:
-        if self.config.model == "paper":
-            return IncrementalRules(self.config.rules, batch=batch, properties=self.properties,
-                                    retro_floor=self.config.retro_floor)
-        return CausalRules(self.config.rules, batch=batch, properties=self.properties)
+        c = self.config
+        if c.learning == "evidence":
+            return CausalRules(c.rules, batch=batch, properties=self.properties)
+        kind = ContextualRules if c.learning == "contextual" else IncrementalRules
+        return kind(c.rules, batch=batch, properties=self.properties, retro_floor=c.retro_floor)
 
     def _judged(self) -> list[int]:
         """The judged properties' maps, in `properties` order: their indices into the maps (and the hub's
@@ -229,26 +232,82 @@ class Agent(nn.Module):
     @torch.no_grad()
     def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor) -> "Anticipation":
         """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all)."""
-        # knowledge reaches recall through the pathways' strengths (the "gating" ablation cuts that: all at 1)
-        ungated = torch.ones_like(self.hub.strength) if "gating" in self.config.ablate else None
-        cue = self.hub.bottom_up(acts, self.cue_present(present), strength=ungated)
+        values = self.decode(acts)
+        p_sink = None
+        if self._fates_seen():
+            # recall in two steps: the cue through what decides the fate recalls episodes whose fates vote for the
+            # one expected; then the cue through what decides the reward in that fate recalls the episodes to read
+            first = self.memory.recall(self._cue(acts, present, FATE))
+            p_sink = self._fate_vote(first)
+            recall = self.memory.recall(self._cue(acts, present, (p_sink > 0.5).long()))
+        else:
+            recall = self.memory.recall(self._cue(acts, present))
+        rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
+        fates = self._fates(recall)
+        recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes)))
+        strength = recall.strength * recall.valid
+        readout = "average" if "fit" in self.config.ablate else self.config.readout
+        nan = torch.full((self.batch,), float("nan"))
+        by_fate, p_out = torch.stack([nan, nan], 1), nan
+        if readout == "prior_fit":
+            by_fate, p_out = self.readout_by_fate(self.features(values), self.features(recalled), rewards, fates,
+                                                  strength)
+            expected = self.expected_of(by_fate, p_out)
+        elif readout == "local_fit" or p_sink is not None:
+            expect = (p_sink > 0.5).long() if p_sink is not None else torch.zeros(self.batch, dtype=torch.long)
+            in_fate = (fates == expect[:, None]) if p_sink is not None else strength > 0
+            dominant = self._dominant(expect) if readout == "local_fit" else torch.zeros(
+                self.batch, len(self.properties), dtype=torch.bool)
+            expected = local_readout(values, recalled, rewards, strength, in_fate, dominant, self.properties,
+                                     self.config)
+            if p_sink is not None:
+                p_out = p_sink
+                by_fate = torch.where(torch.arange(2)[None] == expect[:, None], expected[:, None], by_fate)
+        else:
+            expected = recall_average(rewards, strength, self.config.recall_sharpness)
+        return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates, by_fate, p_out)
+
+    def _fates_seen(self) -> bool:
+        """Whether the rules keep knowledge per fate (contextual learning, contexts not ablated): then recall goes
+        in two steps, the fate first."""
+        return self.config.learning == "contextual" and "context" not in self.config.ablate
+
+    def _cue(self, acts: torch.Tensor, present: torch.Tensor, context: int | torch.Tensor | None = None
+             ) -> torch.Tensor:
+        """The hub's bottom-up cue to the memory. Knowledge reaches recall through the pathways' strengths: the
+        hub's, or those of a context of the rules (an int, or (B,) long per agent: contextual_rules.CONTEXTS). The
+        "gating" ablation cuts that: all at 1."""
+        if "gating" in self.config.ablate:
+            strength = torch.ones_like(self.hub.strength)
+        elif context is None:
+            strength = None
+        else:
+            strength = self.hub.strength.clone()
+            ctx = torch.as_tensor(context).expand(self.batch)
+            strength[:, self._judged()] = self.rules.context_strength()[torch.arange(self.batch), ctx]
+        cue = self.hub.bottom_up(acts, self.cue_present(present), strength=strength)
         if not self.config.names_in_cue:
             # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
             cue = cue * self._episode_neurons().to(cue.dtype)
-        recall = self.memory.recall(cue)
-        rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
+        return cue
+
+    def _fate_vote(self, recall) -> torch.Tensor:
+        """(B,) how likely the object sinks: the recalled episodes' seen fates, each weighted by its recall strength
+        to the power recall_sharpness (as the average weighs rewards); 0.5 where no fate was seen."""
         fates = self._fates(recall)
-        values = self.decode(acts)
-        recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes)))
-        if self.config.model == "paper":
-            expected = recall_average(rewards, recall.strength * recall.valid, self.config.recall_sharpness)
-            nan = torch.full_like(expected, float("nan"))
-            return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates,
-                                torch.stack([nan, nan], 1), nan)
-        by_fate, p_sink = self.readout_by_fate(self.features(values), self.features(recalled), rewards, fates,
-                                               recall.strength * recall.valid)
-        return Anticipation(self.expected_of(by_fate, p_sink), rewards, recall, acts, present, values, recalled,
-                            fates, by_fate, p_sink)
+        seen = fates >= 0
+        s = torch.where(seen, recall.strength, torch.zeros_like(recall.strength)).double()
+        w = (s / s.amax(-1, keepdim=True).clamp_min(1e-300)) ** self.config.recall_sharpness * seen
+        total = w.sum(-1)
+        p = (w * (fates == 1)).sum(-1) / total.clamp_min(1e-300)
+        return torch.where(total > 0, p, torch.full_like(p, 0.5)).float()
+
+    def _dominant(self, fate: torch.Tensor) -> torch.Tensor:
+        """(B, P) the properties dominant in each agent's expected fate (fate (B,) long: 0 floats, 1 sinks), or
+        overall where the rules keep no contexts."""
+        if self._fates_seen():
+            return self.rules.dominant[torch.arange(self.batch), fate]
+        return self.rules.state == DOMINANT
 
     @staticmethod
     def _assemblies(episodes: torch.Tensor) -> torch.Tensor:
@@ -406,10 +465,10 @@ class Agent(nn.Module):
                                 strength)
         self._set_judged_strength(strength)
         delta_p, delta_c, unclear_c, skipped = c.delta_p, c.delta_c, c.unclear_c, c.skipped
-        # nothing new to learn (the paper's episode 2): the episode it is most like went the same way and differed
-        # in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
+        # nothing new to learn (the paper's episode 2): the episode it is most like (compared: recalled at least
+        # compare_floor strongly) went the same way and differed in at most one property. Anything else is new: nothing recalled, a contradiction, an outcome that cannot
         # tell, or a different object that happened to end the same
-        same = recall.valid[:, 0] & ~delta_c[:, 0] & ~unclear_c[:, 0] & (delta_p[:, 0].sum(-1) <= 1) & ~skipped[:, 0]
+        same = c.compared[:, 0] & ~delta_c[:, 0] & ~unclear_c[:, 0] & (delta_p[:, 0].sum(-1) <= 1) & ~skipped[:, 0]
         encoded = learn & ~same
         count = self.hub.n_assemblies.clone()
         if encoded.any():

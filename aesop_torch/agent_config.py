@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
-from .encoders import PROPERTIES, EncoderConfig
+from .encoders import PROPERTIES, SPLIT_PROPERTIES, EncoderConfig
 from .hub import HubConfig
 from .memory import MemoryConfig
 from .rules import RulesConfig
@@ -19,8 +19,16 @@ from .rules import RulesConfig
 OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows of 50, 2 neurons of each per object
 AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 
-MODELS = ("paper", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}
+MODELS = ("paper", "contextual", "extended")
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+             "extended": ("rules", "gating", "prior")}
+# the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
+LEARNING = ("incremental", "contextual", "evidence")
+READOUTS = ("average", "local_fit", "prior_fit")
+# the contextual model's DeltaProperty bands, per SPLIT_PROPERTIES: colour and elongation as the paper's colour and
+# shape (RGB / ratio distance); fill as |log ratio| with size's bounds in volume (a sinker's volume is proportional
+# to its fill: 9 % unchanged, 20 % changed, the outcome's tolerances); size and weight as the paper's
+SPLIT_DELTA_BAND = ((0.08, 0.15), (0.09, 0.2), (0.08, 0.15), (0.03, 0.077), (0.049, 0.223))
 
 
 @dataclass
@@ -139,6 +147,24 @@ class AgentConfig:
     # the strongest alone) and ended with all four properties eliminated in 12 of 32 (set, order) (each episode is
     # compared with ~all the store: every chance of a wrong Elimination)
     compare_with: int | None = 1
+    # the parts (LEARNING, READOUTS; the named models set them): how the rules learn, "incremental" (the paper's:
+    # each firing edits one pathway strength), "contextual" (the same firings, kept per context the robot sees:
+    # what decides the fate, and what decides the reward among floaters and among sinkers; incremental_rules.py) or
+    # "evidence" (rules.py: knowledge derived from every comparison kept); and how the reward is read out of the
+    # recalled episodes, "average" (the paper's), "local_fit" (local_readout.py) or "prior_fit" (fitted_readout.py,
+    # with the task's physics priors)
+    learning: str = "incremental"
+    readout: str = "average"
+    # contextual: the rules compare the present with every recalled episode at least this strongly recalled (the
+    # memory's recall strength, 0..1: the mean cue activity on the episode's object code). A novel object's recall
+    # brings back most of the store at some strength; 0.5 keeps the episodes of objects that share at least half of
+    # what the pathways show (one of two properties changed, at full strength: 0.5..0.75), so a comparison has a
+    # chance to be clean (one property changed). Tuning seeds 1000..: see docs/model.md
+    compare_floor: float = 0.5
+    # contextual: the local fit weighs each recalled episode of the expected fate by its recall strength to this
+    # power (the average's recall_sharpness keeps the best few; a fit needs episodes that differ, so a wider
+    # neighbourhood). Tuning seeds 1000..: see docs/model.md
+    fit_sharpness: float = 4.0
     seed: int = 0
 
     @classmethod
@@ -150,11 +176,24 @@ class AgentConfig:
     def extended(cls, **kw) -> "AgentConfig":
         """The extended model: evidence-set rules with contexts, and a readout fitted with the task's physics priors
         (volume as fill x size^3, extensive properties as proportions, a sink-or-float boundary on the two fits)."""
-        return cls(**{"model": "extended", "compare_with": None, **kw})
+        return cls(**{"model": "extended", "learning": "evidence", "readout": "prior_fit", "compare_with": None,
+                      **kw})
+
+    @classmethod
+    def contextual(cls, **kw) -> "AgentConfig":
+        """The contextual model, made of the paper's parts: the object's properties judged one by one (shape split
+        into fill and elongation), the rules' knowledge kept per fate the robot sees (what decides the fate, what
+        decides the reward among floaters and among sinkers), compared with every sufficiently recalled episode and
+        free to grow an eliminated pathway back; recall in two steps (the fate, then the reward within it) and a
+        local fit over the recalled episodes of the expected fate."""
+        kw = {"model": "contextual", "learning": "contextual", "readout": "local_fit", "compare_with": None,
+              "delta_p_band": SPLIT_DELTA_BAND, **kw}
+        kw.setdefault("encoder", EncoderConfig(properties=SPLIT_PROPERTIES))
+        return cls(**kw)
 
     @classmethod
     def named(cls, model: str, **kw) -> "AgentConfig":
-        """`paper(**kw)` or `extended(**kw)` by name (MODELS). Use these rather than AgentConfig(model=...): a model
+        """`paper(**kw)`, `contextual(**kw)` or `extended(**kw)` by name (MODELS). Use these rather than AgentConfig(model=...): a model
         is more than that one field (the extended model compares with every recalled episode)."""
         if model not in MODELS:
             raise ValueError(f"unknown model {model!r} (known: {', '.join(MODELS)})")
@@ -168,11 +207,17 @@ class AgentConfig:
         if bad := [a for a in self.ablate if a not in allowed]:
             raise ValueError(f"AgentConfig.ablate: {', '.join(map(repr, bad))} is no ablation of the {self.model} "
                              f"model (it has: {', '.join(allowed)})")
+        if self.learning not in LEARNING or self.readout not in READOUTS:
+            raise ValueError(f"AgentConfig.learning must be one of {', '.join(LEARNING)} and readout one of "
+                             f"{', '.join(READOUTS)}, got {self.learning!r}, {self.readout!r}")
+        if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0:
+            raise ValueError(f"AgentConfig.compare_floor must be in 0..1 and fit_sharpness > 0, got "
+                             f"{self.compare_floor}, {self.fit_sharpness}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
         n = len(self.properties)
-        if len(self.delta_p_band) == len(PROPERTIES) < n:   # the context properties' bands, unless given
+        if len(self.delta_p_band) == len(self.encoder.properties) < n:   # the context properties' bands, unless given
             self.delta_p_band += (tuple(map(float, self.CONTEXT_DELTA_BAND)),) * (n - len(PROPERTIES))
         if len(self.delta_p_band) != n or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
             raise ValueError(f"AgentConfig.delta_p_band needs {n} (lo, hi) pairs with 0 <= lo <= hi (one per "
@@ -182,7 +227,7 @@ class AgentConfig:
     def properties(self) -> tuple:
         """The properties the rules judge: the object's (PROPERTIES), then the context's (EncoderConfig.context),
         each perceived on a map of its own and compared between episodes alike."""
-        return PROPERTIES + tuple(self.encoder.context)
+        return tuple(self.encoder.properties) + tuple(self.encoder.context)
 
     def to_dict(self) -> dict:
         return asdict(self)
@@ -190,4 +235,8 @@ class AgentConfig:
     @classmethod
     def from_dict(cls, d: dict) -> "AgentConfig":
         parts = {"encoder": EncoderConfig, "hub": HubConfig, "memory": MemoryConfig, "rules": RulesConfig}
+        d = dict(d)
+        if d.get("model") == "extended":   # a config from before the models were made of parts
+            d.setdefault("learning", "evidence")
+            d.setdefault("readout", "prior_fit")
         return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})

@@ -14,7 +14,8 @@ from dataclasses import dataclass
 
 import torch
 
-from .fitted_readout import readout_features
+from .fitted_readout import log_mass, log_size
+from .contextual_rules import FATE
 from .rules import STATUS_QUO, context_of, contradiction, outcome_unclear
 
 
@@ -36,13 +37,19 @@ def delta_property(values: dict, recalled: dict, config, strength: torch.Tensor 
     delta_p_band, felt mass noise and retro_floor). strength (B, K, P): the
     pathway's strength for each comparison (default 1); at or below `retro_floor` the pathway retro-activates
     nothing, so there is nothing to differ from (neither changed nor unclear)."""
-    x, xk = readout_features(values, config.encoder)[:, None], readout_features(recalled, config.encoder)
-    gaps = {"color": (values["color"][:, None] - recalled["color"]).norm(dim=-1),
-            "shape": (values["shape"][:, None] - recalled["shape"]).norm(dim=-1),
-            "size": (x[..., 4] - xk[..., 4]).abs(), "weight": (x[..., 5] - xk[..., 5]).abs()}
-    # a context property (EncoderConfig.context): its decoded value in 0..1, as its map reads it
-    gaps.update({p: (values[p][:, None] - recalled[p]).norm(dim=-1) for p in config.encoder.context})
-    noise = 3.0 * config.felt_mass_noise_g / torch.minimum(x[..., 5], xk[..., 5]).exp()
+    enc = config.encoder
+    size, size_k = log_size(values, enc)[:, None], log_size(recalled, enc)
+    mass, mass_k = log_mass(values, enc)[:, None], log_mass(recalled, enc)
+    gaps = {"size": (size - size_k).abs(), "weight": (mass - mass_k).abs()}
+    # colour as RGB distance, shape and elongation as the distance of their values, fill as |log ratio| (volume
+    # is proportional to it), a context property (EncoderConfig.context) as its decoded value in 0..1 moved
+    for p in ("color", "shape", "elongation", *enc.context):
+        if p in values:
+            gaps[p] = (values[p][:, None] - recalled[p]).norm(dim=-1)
+    if "fill" in values:
+        gaps["fill"] = (values["fill"][:, None, 0].clamp_min(1e-3).log()
+                        - recalled["fill"][..., 0].clamp_min(1e-3).log()).abs()
+    noise = 3.0 * config.felt_mass_noise_g / torch.minimum(mass, mass_k).exp()
     changed, unclear = [], []
     for i, p in enumerate(config.properties):
         lo, hi = config.delta_p_band[i]
@@ -66,6 +73,28 @@ class Comparisons:
     unclear_c: torch.Tensor  # (B, K) bool: the outcome in its dead zone against that episode's
     fired: torch.Tensor      # (B, K, P) the rule each comparison fired (rules.RULE_NAMES codes)
     skipped: torch.Tensor    # (B, K) bool: compared but left out (`cannot_tell`)
+    compared: torch.Tensor   # (B, K) bool: compared (valid, learning, within compare_with and compare_floor)
+
+
+def judgments(config, fate: torch.Tensor, fates_k: torch.Tensor, stored: torch.Tensor, reward_k: torch.Tensor
+              ) -> list[tuple]:
+    """What one comparison (the present, fate (B,), against a recalled episode, fates_k (B,)) is judged on: a list
+    of (context (B,) long or None, delta_c (B,), unclear_c (B,), applies (B,)), one per set of pathways it teaches.
+
+    incremental and evidence rules: one, the reward, in the comparison's context (rules.context_of: both floated,
+    both sank, or mixed). contextual rules (contextual_rules.py): the fate, on every comparison whose fates were
+    both seen (its outcome is whether the fate differs, which cannot be unclear), and the reward, in the fate, on
+    those whose fates were the same; with contexts off (the "context" ablation) only the reward, in every context
+    at once (None)."""
+    delta_c = contradiction(stored, reward_k, config.rules)
+    unclear_c = outcome_unclear(stored, reward_k, config.rules)
+    if config.learning != "contextual":
+        return [(context_of(fate, fates_k), delta_c, unclear_c, torch.ones_like(delta_c))]
+    if "context" in config.ablate:
+        return [(None, delta_c, unclear_c, torch.ones_like(delta_c))]
+    seen = (fate >= 0) & (fates_k >= 0)
+    return [(torch.full_like(fate, FATE), fate != fates_k, torch.zeros_like(seen), seen),
+            (fate.clamp(min=0), delta_c, unclear_c, seen & (fate == fates_k))]
 
 
 def compare(a, stored: torch.Tensor, fate: torch.Tensor, learn: torch.Tensor, config, rules,
@@ -74,36 +103,52 @@ def compare(a, stored: torch.Tensor, fate: torch.Tensor, learn: torch.Tensor, co
 
     a: the agent's Anticipation of the present object; stored (B, 1): the observed outcome as the memory will hold
     it (through the reward code); fate (B,) long: 0 floated, 1 sank, -1 not seen; learn (B,) bool: agents that take
-    part; rules: the agent's rules (edited in place); strength (B, P): the property pathways' strengths."""
+    part; rules: the agent's rules (edited in place); strength (B, P): the property pathways' strengths.
+    Which recalled episodes: the strongest config.compare_with of them (None: all), each recalled at least
+    config.compare_floor strongly (the contextual rules'; 0 for the others)."""
     recall = a.recall
     B = fate.shape[0]
     compared = recall.valid & learn[:, None]                                   # (B, K)
     if config.compare_with is not None:
         compared[:, config.compare_with:] = False
+    if config.learning == "contextual":
+        compared &= recall.strength >= config.compare_floor
     K = compared.shape[1]
-    context = context_of(fate[:, None].expand(B, K), a.fates)                  # (B, K)
-    # the outcome as the memory will hold it, against the outcomes it holds: both read through the reward code
-    delta_c = contradiction(stored, a.rewards, config.rules) & compared
-    unclear_c = outcome_unclear(stored, a.rewards, config.rules)
     P = rules.state.shape[1]
     fired = torch.full((B, K, P), STATUS_QUO, dtype=rules.state.dtype, device=compared.device)
     delta_p = torch.zeros(B, K, P, dtype=torch.bool, device=compared.device)
+    delta_c = torch.zeros(B, K, dtype=torch.bool, device=compared.device)
+    unclear_out = torch.zeros_like(delta_c)
     skipped = torch.zeros_like(compared)
+    rank = torch.tensor([0, 3, 2, 1], device=compared.device)                  # S < U < G < E
+    regrow = config.learning == "contextual"
+    rows = torch.arange(B, device=compared.device)
     # recalls come strongest first, the valid ones before the rest: past the most any agent compared with, a
     # slot compares nothing and fires no rule (its comparisons are left out, not run; unbounded, K = the slots
     # of a whole memory)
     used = max(1, int(compared.sum(1).max()))
     for k in range(used):
-        # each comparison sees the pathways as they are in its context, after the comparisons before it
-        gate = rules.context_strength()[torch.arange(B), context[:, k]]
-        dp, unclear = delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()}, config,
-                                     gate[:, None])
-        use = compared[:, k] & ~cannot_tell(unclear[:, 0], delta_c[:, k], unclear_c[:, k])
-        delta_p[:, k] = dp = dp[:, 0] & use[:, None]
-        skipped[:, k] = compared[:, k] & ~use
-        if "rules" not in config.ablate:
-            fired[:, k] = rules.apply(dp, delta_c[:, k] & use, use, strength=strength, context=context[:, k])
-    return Comparisons(delta_p, delta_c, unclear_c, fired, skipped)
+        recalled_k = {p: v[:, k:k + 1] for p, v in a.recalled_values.items()}
+        if regrow:   # what changed at full strength, for growing an eliminated pathway back
+            full, full_unclear = delta_property(a.values, recalled_k, config)
+            bottom_up = full[:, 0] & ~full_unclear[:, 0].any(-1, keepdim=True)
+        for ctx, dc, unclear_c, applies in judgments(config, fate, a.fates[:, k], stored[:, 0], a.rewards[:, k]):
+            # each comparison sees the pathways as they are in its context, after the comparisons before it
+            cs = rules.context_strength()
+            gate = cs[rows, ctx] if ctx is not None else cs[:, 0]
+            dp, unclear = delta_property(a.values, recalled_k, config, gate[:, None])
+            on = compared[:, k] & applies
+            use = on & ~cannot_tell(unclear[:, 0], dc, unclear_c)
+            dp = dp[:, 0] & use[:, None]
+            delta_p[:, k] |= dp
+            delta_c[:, k] |= dc & on
+            unclear_out[:, k] |= unclear_c & on
+            skipped[:, k] |= on & ~use
+            if "rules" not in config.ablate:
+                kw = {"bottom_up": bottom_up & use[:, None]} if regrow else {}
+                f = rules.apply(dp, dc & use, use, strength=strength, context=ctx, **kw)
+                fired[:, k] = torch.where(rank[f] > rank[fired[:, k]], f, fired[:, k])
+    return Comparisons(delta_p, delta_c, unclear_out, fired, skipped, compared)
 
 
 def pairwise(values: dict, observed: torch.Tensor, sank: torch.Tensor, config

@@ -34,6 +34,9 @@ from torch import nn
 from .som import SOMConfig, SelfOrganizingMap
 
 PROPERTIES = ("color", "shape", "size", "weight")
+# the object's properties judged one by one: the paper's "shape" split into what decides a sinker's volume (fill:
+# volume over bounding box) and what does not (elongation: the two shorter extents over the longest)
+SPLIT_PROPERTIES = ("color", "fill", "elongation", "size", "weight")
 WORD_MAP = "word"
 MAP_NAMES = PROPERTIES + (WORD_MAP,)
 
@@ -59,10 +62,19 @@ class EncoderConfig:
     # developmental shapes: a cylinder's height / diameter is log-uniform in [1/max_aspect, max_aspect] and a box's
     # two shorter sides over its longest in [1/max_aspect, 1]: from a disc or slab to a rod, up to a factor 4.
     max_aspect: float = 4.0
+    # the object's properties, each perceived on a map of its own: the paper's four (PROPERTIES), or shape split
+    # into fill and elongation (SPLIT_PROPERTIES)
+    properties: tuple = PROPERTIES
     # extra context properties perceived with the object (e.g. an apparatus' tube width or water level), each a 1-d
     # value in 0..1 given as measurement["context"][name], each on a SOM map of its own; none by default, so the
     # default agent has exactly the paper's four property maps and the word map
     context: tuple = ()
+
+    def __post_init__(self):
+        self.properties, self.context = tuple(self.properties), tuple(self.context)
+        if self.properties not in (PROPERTIES, SPLIT_PROPERTIES):
+            raise ValueError(f"EncoderConfig.properties must be {PROPERTIES} or {SPLIT_PROPERTIES}, "
+                             f"got {self.properties}")
 
 
 def _log_unit(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:
@@ -151,7 +163,11 @@ class SensoryEncoder(nn.Module):
             if (fill <= 0).any() or (fill > 1).any():
                 raise ValueError("measurement 'fill' must be in (0, 1]")
             ext = ext.sort(dim=-1, descending=True).values  # robust to an unsorted caller
-            out["shape"] = torch.stack([fill, ext[:, 1] / ext[:, 0], ext[:, 2] / ext[:, 0]], -1)
+            ratios = torch.stack([ext[:, 1] / ext[:, 0], ext[:, 2] / ext[:, 0]], -1)
+            if "shape" in c.properties:
+                out["shape"] = torch.cat([fill[:, None], ratios], -1)
+            if "fill" in c.properties:
+                out["fill"], out["elongation"] = fill[:, None], ratios
             out["size"] = _log_unit(ext.prod(-1, keepdim=True) ** (1.0 / 3.0), c.size_min_cm, c.size_max_cm)
         if "mass_g" in measurement:
             mass = _batched(measurement["mass_g"], "mass_g", ())
@@ -231,12 +247,19 @@ def default_map_configs(config: EncoderConfig | None = None) -> dict[str, SOMCon
       phase is what separates them). Phrases are read word by word (`word_activity`).
     - each context property of config.context: 1x20 over 0..1, like size (a unit per 1/20, sigma the spacing).
     1-d data get 1-d maps (a line cannot fold). The radius starts at about a quarter of the map's longest side.
+    - fill 1x20 over 0..1 (a unit per 0.05, sigma the spacing) and elongation 6x6 over the two extent ratios,
+      sigma 0.1 (neighbours ~0.1-0.15 apart), when shape is split (EncoderConfig.properties = SPLIT_PROPERTIES).
     """
+    config = config or EncoderConfig()
     context = {name: SOMConfig(rows=1, cols=20, dim=1, sigma=5.0, sigma_end=0.5, activity_sigma=0.05)
-               for name in (config.context if config is not None else ())}
+               for name in config.context}
+    shape = ({"shape": SOMConfig(rows=8, cols=8, dim=3, sigma=2.0, sigma_end=0.5, activity_sigma=0.1)}
+             if "shape" in config.properties else
+             {"fill": SOMConfig(rows=1, cols=20, dim=1, sigma=5.0, sigma_end=0.5, activity_sigma=0.05),
+              "elongation": SOMConfig(rows=6, cols=6, dim=2, sigma=1.5, sigma_end=0.5, activity_sigma=0.1)})
     return {
         "color": SOMConfig(rows=10, cols=10, dim=3, sigma=2.5, sigma_end=0.5, activity_sigma=0.2),
-        "shape": SOMConfig(rows=8, cols=8, dim=3, sigma=2.0, sigma_end=0.5, activity_sigma=0.1),
+        **shape,
         "size": SOMConfig(rows=1, cols=20, dim=1, sigma=5.0, sigma_end=0.5, activity_sigma=0.05),
         "weight": SOMConfig(rows=1, cols=30, dim=1, sigma=7.5, sigma_end=0.5, activity_sigma=0.033),
         WORD_MAP: SOMConfig(rows=8, cols=8, dim=len(VOCABULARY), sigma=1.5, sigma_end=0.3, activity_sigma=0.4,

@@ -65,12 +65,21 @@ def as_volume(features: torch.Tensor, columns: torch.Tensor) -> tuple[torch.Tens
     return out, columns
 
 
+def log_size(values: dict, e: EncoderConfig) -> torch.Tensor:
+    """(...) the decoded size as a log length (cm): the map's 0..1 back over the encoder's range."""
+    return values["size"][..., 0] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm)
+
+
+def log_mass(values: dict, e: EncoderConfig) -> torch.Tensor:
+    """(...) the decoded weight as a log mass (g)."""
+    return values["weight"][..., 0] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g)
+
+
 def readout_features(values: dict, encoder: EncoderConfig) -> torch.Tensor:
     """Decoded values -> (..., 6) readout features (FEATURE_COLUMNS): rgb, log fill, log size (cm), log mass (g)."""
-    e = encoder
-    size = values["size"][..., :1] * math.log(e.size_max_cm / e.size_min_cm) + math.log(e.size_min_cm)
-    mass = values["weight"][..., :1] * math.log(e.mass_max_g / e.mass_min_g) + math.log(e.mass_min_g)
-    return torch.cat([values["color"], values["shape"][..., :1].clamp_min(1e-3).log(), size, mass], -1)
+    fill = values["shape"][..., :1] if "shape" in values else values["fill"][..., :1]
+    return torch.cat([values["color"], fill.clamp_min(1e-3).log(), log_size(values, encoder)[..., None],
+                      log_mass(values, encoder)[..., None]], -1)
 
 
 def expected_of(by_fate: torch.Tensor, p_sink: torch.Tensor) -> torch.Tensor:

@@ -1,0 +1,182 @@
+"""The paper's four rules, kept per context the robot sees: what decides the fate, and what decides the reward within
+each fate.
+
+A sinker displaces its volume and a floater its weight, so whether a property matters depends on what became of the
+object, and whether it floats depends on properties of its own. The robot sees each object float or rest on the
+bottom, stores that fate with the episode, and keeps three sets of pathway strengths (`CONTEXTS`):
+
+- "fate": judged on every comparison of two episodes whose fates were seen, the outcome being the fate. The paper's
+  episode 3 is such a comparison: the 14 g cylinder floats where the 420 g one sank, weight alone changed, so Growth
+  on weight as what decides the fate.
+- "floating" and "sinking": judged on comparisons within one fate, the outcome being the reward (DeltaContradiction).
+
+Each firing edits one pathway strength in place, as the paper states the rules (incremental_rules.py holds the same
+arithmetic for one context): Elimination drops it below the retro-activation floor, Growth adds `growth_step` (up to
+`dominant_strength`), Uncertainty keeps `uncertain_decay` of an undecided pathway (never below `uncertain_floor`),
+Status quo nothing. E and G attribute only on a clean comparison (one property changed among those the context's
+pathways still show). Two choices the paper leaves open, made so the rules keep learning:
+
+- A grown pathway is not eliminated. A clean change that moved the outcome shows the property can matter; a clean
+  change that did not shows only that this change was too small to (whether an object floats flips at a boundary:
+  most weight changes leave the fate as it was). The Elimination is then a Status quo.
+- An eliminated pathway grows back. An outcome that moved while no pathway the context still shows changed, and
+  where, seen bottom-up at full strength, exactly one property changed and that one was eliminated, is explained by
+  it alone: Growth fires on it (from the eliminated strength, so it is dominant at once).
+
+Knowledge per context is read from the strengths: irrelevant at or below the retro-activation floor, dominant above
+1, likely irrelevant once Uncertainty fired there, else unknown. Over contexts (`state`): dominant in some context,
+else irrelevant in some, else likely irrelevant, else unknown. With contexts off (the "context" ablation) every
+comparison is judged on its reward in one context and all three hold the same strengths.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import nn
+
+from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, LIKELY_IRRELEVANT, PROPERTIES, STATES, STATUS_QUO,
+                    UNCERTAINTY, UNKNOWN, RulesConfig)
+
+CONTEXTS = ("floating", "sinking", "fate")
+FLOATING, SINKING, FATE = range(3)
+
+
+class ContextualRules(nn.Module):
+    """E/G/U/S on per-context pathway strengths; batched over agents (dim B).
+
+    buffers: strength (B, C, P) the pathways' strengths per context (init 1), fired (B, C, P, 4) how often each rule
+    fired there (codes into rules.RULE_NAMES), state (B, P) the knowledge over contexts (codes into rules.STATES)."""
+
+    contexts = CONTEXTS
+
+    def __init__(self, config: RulesConfig | None = None, batch: int = 1, properties=PROPERTIES,
+                 retro_floor: float = 0.1):
+        super().__init__()
+        self.config = config or RulesConfig()
+        self.properties = tuple(properties)
+        self.retro_floor = retro_floor
+        P, C = len(self.properties), len(CONTEXTS)
+        self.register_buffer("strength", torch.ones(batch, C, P))
+        self.register_buffer("fired", torch.zeros(batch, C, P, 4, dtype=torch.long))
+        self.register_buffer("state", torch.zeros(batch, P, dtype=torch.long))
+
+    # -- knowledge read from the strengths --------------------------------------------------------------------
+    @property
+    def context_state(self) -> torch.Tensor:
+        """(B, C, P) the knowledge in each context (codes into STATES)."""
+        s = self.strength
+        state = torch.full(s.shape, UNKNOWN, dtype=torch.long, device=s.device)
+        state[self.fired[..., UNCERTAINTY] > 0] = LIKELY_IRRELEVANT
+        state[s > 1.0] = DOMINANT
+        state[s <= self.retro_floor] = IRRELEVANT
+        return state
+
+    @property
+    def eliminated(self) -> torch.Tensor:
+        return self.strength <= self.retro_floor
+
+    @property
+    def dominant(self) -> torch.Tensor:
+        return self.strength > 1.0
+
+    @property
+    def confounded(self) -> torch.Tensor:
+        """(B, P) all False: Growth fires only on a clean comparison, so no dominance rests on a confound."""
+        return torch.zeros_like(self.state, dtype=torch.bool)
+
+    @property
+    def context_certainty(self) -> torch.Tensor:
+        """(B, C, P) 1 for dominant and irrelevant, 1 - (1 - step)^n after n Uncertainty firings, 0 unknown."""
+        state = self.context_state
+        grown = 1.0 - (1.0 - self.config.certainty_step) ** self.fired[..., UNCERTAINTY].to(torch.float32)
+        grown[state == UNKNOWN] = 0.0
+        grown[(state == DOMINANT) | (state == IRRELEVANT)] = 1.0
+        return grown
+
+    @property
+    def certainty(self) -> torch.Tensor:
+        """(B, P) the certainty of the context that decides `state` (its highest where several agree)."""
+        state, cert = self.context_state, self.context_certainty
+        return torch.where(state == self.state[:, None], cert, torch.zeros_like(cert)).amax(1)
+
+    def context_strength(self, dtype=torch.float32) -> torch.Tensor:
+        return self.strength.to(dtype)
+
+    def strength_from_knowledge(self, dtype=torch.float32) -> torch.Tensor:
+        """(B, P) one strength per pathway for the hub (which tells stored objects apart): the largest over contexts,
+        so a property that matters anywhere still tells two objects apart."""
+        return self.strength.amax(1).to(dtype)
+
+    def _read_state(self) -> None:
+        cs = self.context_state
+        state = torch.full_like(self.state, UNKNOWN)
+        state[(cs == LIKELY_IRRELEVANT).any(1)] = LIKELY_IRRELEVANT
+        state[(cs == IRRELEVANT).any(1)] = IRRELEVANT
+        state[(cs == DOMINANT).any(1)] = DOMINANT
+        self.state.copy_(state)
+
+    # -- one comparison -----------------------------------------------------------------------------------------
+    @torch.no_grad()
+    def apply(self, delta_p: torch.Tensor, delta_c: torch.Tensor, compared: torch.Tensor,
+              strength: torch.Tensor | None = None, context: torch.Tensor | None = None,
+              bottom_up: torch.Tensor | None = None) -> torch.Tensor:
+        """One comparison per agent, judged in `context` (B,) long codes into CONTEXTS, or None: in every context
+        at once (contexts off). delta_p (B, P) bool: the property changed as the context's pathways show it;
+        delta_c (B,): the outcome (the fate, or the reward) contradicted the recalled one; compared (B,): the
+        comparison counts. bottom_up (B, P) bool, optional: the properties changed at full strength (clearly),
+        for growing back an eliminated pathway. strength (B, P), optional: rewritten with
+        `strength_from_knowledge`. Returns the rule fired per agent and property (codes into RULE_NAMES)."""
+        B, C, P = self.strength.shape
+        rows = torch.arange(B, device=self.strength.device)
+        slots = range(C) if context is None else [None]
+        fired = None
+        for slot in slots:
+            ctx = torch.full((B,), slot, dtype=torch.long, device=rows.device) if slot is not None else context
+            f = self._fire(self.strength[rows, ctx], delta_p, delta_c, compared, bottom_up)
+            self.strength[rows, ctx] = self._edit(self.strength[rows, ctx], f)
+            self.fired[rows, ctx] += torch.nn.functional.one_hot(f, 4)
+            fired = f
+        self._read_state()
+        if strength is not None:
+            strength.copy_(self.strength_from_knowledge(strength.dtype))
+        return fired
+
+    def _fire(self, s, delta_p, delta_c, compared, bottom_up) -> torch.Tensor:
+        c = self.config
+        live = s > self.retro_floor
+        dp = delta_p & compared[:, None] & live
+        dc = (delta_c & compared)[:, None]
+        clean = dp.sum(-1, keepdim=True) == 1
+        undecided = live & (s <= 1.0)
+        fired = torch.full(s.shape, STATUS_QUO, dtype=torch.long, device=s.device)
+        fired[dp & ~dc & clean & undecided] = ELIMINATION
+        fired[dp & dc & clean] = GROWTH
+        fired[~dp & dc & undecided] = UNCERTAINTY
+        if bottom_up is not None:
+            # nothing the context shows changed, yet the outcome moved: one eliminated property changed, seen at
+            # full strength, and nothing else did
+            seen = bottom_up & compared[:, None]
+            alone = (seen.sum(-1, keepdim=True) == 1) & ~dp.any(-1, keepdim=True)
+            back = seen & ~live & alone & dc
+            fired[back] = GROWTH
+            fired[back.any(-1, keepdim=True).expand_as(fired) & (fired == UNCERTAINTY)] = STATUS_QUO
+        return fired
+
+    def _edit(self, s, fired) -> torch.Tensor:
+        c = self.config
+        s = torch.where(fired == ELIMINATION, s.clamp(max=c.eliminated_strength), s)
+        s = torch.where(fired == GROWTH, (s + c.growth_step).clamp(max=c.dominant_strength), s)
+        return torch.where(fired == UNCERTAINTY, (s * c.uncertain_decay).clamp(min=c.uncertain_floor).minimum(s), s)
+
+    # -- reading ------------------------------------------------------------------------------------------------
+    def knowledge(self, b: int = 0) -> dict:
+        cert = self.certainty[b]
+        return {p: {"state": STATES[int(self.state[b, i])], "certainty": round(float(cert[i]), 4)}
+                for i, p in enumerate(self.properties)}
+
+    def by_context(self, b: int = 0) -> dict:
+        """Agent b's knowledge per context: {context: {"dominant": [...], "irrelevant": [...]}}."""
+        cs = self.context_state[b]
+        return {c: {"dominant": [p for i, p in enumerate(self.properties) if cs[k, i] == DOMINANT],
+                    "irrelevant": [p for i, p in enumerate(self.properties) if cs[k, i] == IRRELEVANT]}
+                for k, c in enumerate(CONTEXTS)}
