@@ -123,7 +123,7 @@ def test_a_model_switch_takes_the_models_defaults_and_keeps_what_was_changed():
     ("memory.cue_rows=[25]", "memory.cue_rows: MemoryConfig.cue_rows must be distinct rows in 0..19"),
     ("hub.when_full=never", "hub.when_full: HubConfig.when_full must be one of refuse"),
     ('ablate=["prior"]', "ablate: 'prior' is no ablation of the paper model (it has: rules, gating)"),
-    ("model=bayes", "model: unknown model 'bayes' (known: paper, extended)"),
+    ("model=bayes", "model: unknown model 'bayes' (known: paper, contextual, extended)"),
     ("delta_p_band=[[0.2, 0.1], [0, 1], [0, 1], [0, 1]]", "delta_p_band: AgentConfig.delta_p_band needs 4"),
     ("hub.n_neurons=40", "hub.n_neurons: the agent's object hub is the sheet's 12 object rows"),
     ("seed=-1", "seed takes an integer (int) from 0 to"),

@@ -16,7 +16,7 @@ from dataclasses import InitVar, dataclass, field
 import torch
 
 from aesop_torch.agent import Agent, AgentConfig
-from aesop_torch.rules import PROPERTIES, RULE_NAMES
+from aesop_torch.rules import RULE_NAMES
 from train import checkpoint
 
 MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
@@ -175,7 +175,7 @@ class Experiment:
                 "predicted_cm3": _num(float(res.expected[b])),
                 "observed_cm3": round(out["observed_cm3"], 2),
                 "archimedes_cm3": round(out["archimedes_cm3"], 2),
-                "rules": {p: RULE_NAMES[int(fired[b, i])] for i, p in enumerate(PROPERTIES)},
+                "rules": {p: RULE_NAMES[int(fired[b, i])] for i, p in enumerate(self.agent.config.encoder.properties)},
                 "knowledge": self.agent.knowledge(b),
                 "encoded": bool(res.encoded[b]),
                 "goal_reached": out["goal_after"],
@@ -228,7 +228,8 @@ class Experiment:
         "confounded": the dominant properties never shown alone (rules.confounded)}."""
         rules = self.agent.rules
         return [{"by_context": rules.by_context(b),
-                 "confounded": [p for i, p in enumerate(PROPERTIES) if rules.confounded[b, i]]}
+                 "confounded": [p for i, p in enumerate(self.agent.config.encoder.properties)
+                                if rules.confounded[b, i]]}
                 for b in range(len(self.orders))]
 
     def imagine(self, words: str) -> dict:

@@ -22,27 +22,36 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.colors import to_rgba  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter  # noqa: E402
 
-from aesop_torch.rules import PROPERTIES, STATES  # noqa: E402
+from aesop_torch.encoders import OBJECT_PROPERTIES, PROPERTIES, object_properties  # noqa: E402
+from aesop_torch.rules import STATES  # noqa: E402
 from train.quantiles import weighted_quantiles  # noqa: E402
 
 MAX_CURVES = 12  # orders drawn one by one; with more, medians and bands over all orders (a person reads ~12 curves)
 STATE_LETTERS = "ULDI"   # per rules.STATES: unknown, likely irrelevant, dominant, irrelevant
 STATE_MARKERS = tuple(rf"$\mathbf{{{ch}}}$" for ch in STATE_LETTERS)   # each point drawn as its state's letter
-PROPERTY_COLOURS = ("#1b9e77", "#d95f02", "#7570b3", "#e7298a")   # per rules.PROPERTIES (ColorBrewer Dark2)
+# per encoders.OBJECT_PROPERTIES (ColorBrewer Dark2): shape, fill and elongation apart, the rest as before
+PROPERTY_COLOURS = ("#1b9e77", "#d95f02", "#66a61e", "#e6ab02", "#7570b3", "#e7298a")
 ERROR_CLIP = 1e-4        # errors below (a fraction: 0.01 %), exact zeros included, drawn there on the log axis
 BAND = (0.1, 0.9)        # a population's band: these quantiles over orders
 ERROR_BANDS = (BAND, (0.25, 0.75))   # the error's bands, wide then narrow: the spread and the middle half of orders
-assert len(STATE_LETTERS) == len(STATES) and len(PROPERTY_COLOURS) == len(PROPERTIES)
+assert len(STATE_LETTERS) == len(STATES) and len(PROPERTY_COLOURS) == len(OBJECT_PROPERTIES)
+
+
+def _properties(runs: list[list[dict]]) -> tuple:
+    """The object's properties the runs' knowledge names (the paper's four, or the split five)."""
+    first = next((r[0]["knowledge"] for r in runs if r), {})
+    return object_properties(first) or PROPERTIES
 
 
 def knowledge_arrays(runs: list[list[dict]]) -> tuple[np.ndarray, np.ndarray]:
     """(certainty, state code), both (orders, properties, episodes); NaN and -1 past the end of a shorter order."""
     n = max((len(r) for r in runs), default=0)
-    cert = np.full((len(runs), len(PROPERTIES), n), np.nan)
+    props = _properties(runs)
+    cert = np.full((len(runs), len(props), n), np.nan)
     state = np.full(cert.shape, -1, dtype=int)
     for b, run in enumerate(runs):
         for t, rec in enumerate(run):
-            for i, p in enumerate(PROPERTIES):
+            for i, p in enumerate(props):
                 cert[b, i, t] = rec["knowledge"][p]["certainty"]
                 state[b, i, t] = STATES.index(rec["knowledge"][p]["state"])
     return cert, state
@@ -91,7 +100,7 @@ def disagreement(runs: list[list[dict]], population: dict | None = None) -> tupl
         n = int(population["orders"])
         share = 1.0 - float(population["agree_fraction"])
         return share, round(share * n), n, population["most_common_knowledge"]
-    keys = ["".join(STATE_LETTERS[STATES.index(r[-1]["knowledge"][p]["state"])] for p in PROPERTIES)
+    keys = ["".join(STATE_LETTERS[STATES.index(r[-1]["knowledge"][p]["state"])] for p in _properties(runs))
             for r in runs if r]
     if not keys:
         return 0.0, 0, 0, ""
@@ -126,8 +135,10 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
     banded = n_orders > MAX_CURVES
     fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [3, 2]})
     # a small sideways step per property, so equal certainties (all 0 at first, 1 once decided) stay apart
-    dodge = (np.arange(len(PROPERTIES)) - (len(PROPERTIES) - 1) / 2) * min(0.12, 4.0 / max(n_eps, 1))
-    for i, colour in enumerate(PROPERTY_COLOURS):
+    props = _properties(runs)
+    colours = [PROPERTY_COLOURS[OBJECT_PROPERTIES.index(p)] for p in props]
+    dodge = (np.arange(len(props)) - (len(props) - 1) / 2) * min(0.12, 4.0 / max(n_eps, 1))
+    for i, colour in enumerate(colours):
         x = xs + dodge[i]
         if banded:
             med, lo, hi = _median_band(cert[:, i])
@@ -153,8 +164,9 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
     left.set_title(f"causal knowledge per property after each episode{chr(10) if population else ' '}({how})",
                    fontsize=9)
     handles = []
-    for p, colour, s, marker in zip(PROPERTIES, PROPERTY_COLOURS, STATES, STATE_MARKERS):   # a column each
+    for p, colour in zip(props, colours):
         handles.append(Line2D([], [], color=colour, linewidth=2, label=p))
+    for s, marker in zip(STATES, STATE_MARKERS):
         handles.append(Line2D([], [], color="black", marker=marker, markersize=7, linestyle="none",
                               label=s.replace("_", " ")))
     left.legend(handles=handles, fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12),

@@ -46,8 +46,9 @@ MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; s
 LOCK_NAME = ".lock"
 CONFIG_NAME = "config.json"   # the run's config, written when it starts (summary.json's `config`)
 RUN_NAME = "run.json"         # the run's settings as given (objects, orders, physics, overrides): what --resume reads
-MODELS = ("paper", "extended")                                        # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "extended": ("rules", "gating", "prior")}   # and .ABLATIONS
+MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+             "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 

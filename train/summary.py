@@ -19,7 +19,8 @@ import subprocess
 import sys
 from pathlib import Path
 
-from aesop_torch.rules import PROPERTIES, STATES
+from aesop_torch.encoders import object_properties
+from aesop_torch.rules import STATES
 
 ROOT = Path(__file__).resolve().parents[1]
 GIT_TIMEOUT_S = 5.0
@@ -35,7 +36,7 @@ assert len(KNOWLEDGE_LETTERS) == len(STATES)
 
 
 def knowledge_key(k: dict) -> str:
-    return "".join(KNOWLEDGE_LETTERS[STATES.index(k[p]["state"])] for p in PROPERTIES)
+    return "".join(KNOWLEDGE_LETTERS[STATES.index(k[p]["state"])] for p in object_properties(k))
 
 
 def git_commit(root=ROOT, timeout: float = GIT_TIMEOUT_S) -> str:
@@ -93,7 +94,7 @@ def build_summary(exp, population: dict | None = None, config: dict | None = Non
     if population:
         summary["population"] = {
             "orders": len(keys),
-            "key": "one letter per property (" + ", ".join(PROPERTIES)
+            "key": "one letter per property (" + ", ".join(exp.config.encoder.properties)
                    + "): U unknown, L likely irrelevant, D dominant, I irrelevant",
             "most_common_knowledge": population["most_common_knowledge"],
             "agree_fraction": population["agree_fraction"],
@@ -105,15 +106,16 @@ def build_summary(exp, population: dict | None = None, config: dict | None = Non
 
 def knowledge_table(summary: dict) -> str:
     runs = summary["runs"]
-    lines = [f"{'order':<7}" + "".join(f"{p:<26}" for p in PROPERTIES) + "probe error first -> last"]
+    props = object_properties(runs[0]["final_knowledge"]) if runs else ()
+    lines = [f"{'order':<7}" + "".join(f"{p:<26}" for p in props) + "probe error first -> last"]
     for i, run in enumerate(runs[:12]):
         errs = [e["probe_rel_error"] for e in run["episodes"] if e["probe_rel_error"] is not None]
         err = f"{100 * errs[0]:.1f}% -> {100 * errs[-1]:.1f}%" if errs else "n/a"
         confounded = run.get("confounded", [])
         cells = "".join((f"{k['state']} ({k['certainty']:.2f})" + (" conf." if p in confounded else "")).ljust(26)
-                        for p, k in ((p, run["final_knowledge"][p]) for p in PROPERTIES))
+                        for p, k in ((p, run["final_knowledge"][p]) for p in props))
         lines.append(f"{i + 1:<7}{cells}{err}")
-        if i == 0 and summary.get("model") == "extended":
+        if i == 0 and summary.get("model") != "paper":   # a model with contexts
             by = run.get("knowledge_by_context", {})
             lines.append("       by context: " + "; ".join(
                 f"{c}: dominant {', '.join(v['dominant']) or '-'}, irrelevant {', '.join(v['irrelevant']) or '-'}"

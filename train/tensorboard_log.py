@@ -21,12 +21,13 @@ from tensorboard.summary.writer.event_file_writer import _AsyncWriterThread
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams
 
-from aesop_torch.rules import PROPERTIES, RULE_NAMES
+from aesop_torch.encoders import object_properties
+from aesop_torch.rules import RULE_NAMES
 
 
 def episode_line(t: int, rec: dict) -> str:
     exp = "-" if rec["predicted_cm3"] is None else f"{rec['predicted_cm3']:.1f}"
-    rules = " ".join(f"{p}:{rec['rules'][p]}" for p in PROPERTIES)
+    rules = " ".join(f"{p}:{rec['rules'][p]}" for p in object_properties(rec["rules"]))
     line = (f"episode {t + 1}: {rec['object']} expected={exp} observed={rec['observed_cm3']:.1f} "
             f"archimedes={rec['archimedes_cm3']:.1f} rules[{rules}] encoded={rec['encoded']}")
     seen, true = rec.get("perceived"), rec.get("true") or {}
@@ -89,7 +90,7 @@ class OrderLog:
 
     def _episode(self, t: int, rec: dict) -> None:
         w, step = self.writer, t + 1
-        for p in PROPERTIES:
+        for p in object_properties(rec["rules"]):
             w.add_scalar(f"certainty/{p}", rec["knowledge"][p]["certainty"], step)
             for r in RULE_NAMES:
                 w.add_scalar(f"rules/{p}/{r}", float(rec["rules"][p] == r), step)
