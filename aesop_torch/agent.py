@@ -237,7 +237,7 @@ class Agent(nn.Module):
         if self._fates_seen():
             # recall in two steps: the cue through what decides the fate recalls episodes whose fates vote for the
             # one expected; then the cue through what decides the reward in that fate recalls the episodes to read
-            first = self.memory.recall(self._cue(acts, present, FATE))
+            first = self.memory.recall(self._cue(acts, present, FATE), max_recalls=self.config.fate_recalls)
             p_sink = self._fate_vote(first)
             recall = self.memory.recall(self._cue(acts, present, (p_sink > 0.5).long()))
         else:

@@ -165,6 +165,11 @@ class AgentConfig:
     # power (the average's recall_sharpness keeps the best few; a fit needs episodes that differ, so a wider
     # neighbourhood). Tuning seeds 1000..: see docs/model.md
     fit_sharpness: float = 4.0
+    # contextual: the fate's recall (the first of two) brings back at most this many episodes, strongest first. Its
+    # fates vote weighted by recall strength to the power recall_sharpness, so an episode recalled at 0.8 of the
+    # strongest counts 3 % of it, and the ones past the first few barely count; recall is most of an episode's time
+    # (a whole recall settles the network once per episode it brings back)
+    fate_recalls: int = 8
     seed: int = 0
 
     @classmethod
@@ -210,9 +215,9 @@ class AgentConfig:
         if self.learning not in LEARNING or self.readout not in READOUTS:
             raise ValueError(f"AgentConfig.learning must be one of {', '.join(LEARNING)} and readout one of "
                              f"{', '.join(READOUTS)}, got {self.learning!r}, {self.readout!r}")
-        if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0:
-            raise ValueError(f"AgentConfig.compare_floor must be in 0..1 and fit_sharpness > 0, got "
-                             f"{self.compare_floor}, {self.fit_sharpness}")
+        if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0 or not self.fate_recalls >= 1:
+            raise ValueError(f"AgentConfig.compare_floor must be in 0..1, fit_sharpness > 0 and fate_recalls >= 1, "
+                             f"got {self.compare_floor}, {self.fit_sharpness}, {self.fate_recalls}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)

@@ -19,9 +19,11 @@ pathways still show). Two choices the paper leaves open, made so the rules keep 
 - A grown pathway is not eliminated. A clean change that moved the outcome shows the property can matter; a clean
   change that did not shows only that this change was too small to (whether an object floats flips at a boundary:
   most weight changes leave the fate as it was). The Elimination is then a Status quo.
-- An eliminated pathway grows back. An outcome that moved while no pathway the context still shows changed, and
-  where, seen bottom-up at full strength, exactly one property changed and that one was eliminated, is explained by
-  it alone: Growth fires on it (from the eliminated strength, so it is dominant at once).
+- An eliminated pathway grows back. An outcome that moved while no pathway the context still shows changed is
+  explained by an eliminated property that changed, seen bottom-up at full strength. When exactly one such property
+  may matter somewhere (one eliminated in every context is known to matter nowhere: colour, once every context has
+  eliminated it, changes in almost every comparison and explains none), Growth fires on it (from the eliminated
+  strength, so it is dominant at once).
 
 Knowledge per context is read from the strengths: irrelevant at or below the retro-activation floor, dominant above
 1, likely irrelevant once Uncertainty fired there, else unknown. Over contexts (`state`): dominant in some context,
@@ -130,9 +132,12 @@ class ContextualRules(nn.Module):
         rows = torch.arange(B, device=self.strength.device)
         slots = range(C) if context is None else [None]
         fired = None
+        # a property eliminated in every context is known to matter nowhere: it explains no contradiction
+        nowhere = (self.strength <= self.retro_floor).all(1)
         for slot in slots:
             ctx = torch.full((B,), slot, dtype=torch.long, device=rows.device) if slot is not None else context
-            f = self._fire(self.strength[rows, ctx], delta_p, delta_c, compared, bottom_up)
+            up = None if bottom_up is None else bottom_up & ~nowhere
+            f = self._fire(self.strength[rows, ctx], delta_p, delta_c, compared, up)
             self.strength[rows, ctx] = self._edit(self.strength[rows, ctx], f)
             self.fired[rows, ctx] += torch.nn.functional.one_hot(f, 4)
             fired = f
@@ -153,11 +158,12 @@ class ContextualRules(nn.Module):
         fired[dp & dc & clean] = GROWTH
         fired[~dp & dc & undecided] = UNCERTAINTY
         if bottom_up is not None:
-            # nothing the context shows changed, yet the outcome moved: one eliminated property changed, seen at
-            # full strength, and nothing else did
-            seen = bottom_up & compared[:, None]
+            # nothing the context shows changed, yet the outcome moved: of the eliminated properties that changed,
+            # seen at full strength, one alone may matter somewhere (bottom_up leaves out those eliminated in every
+            # context)
+            seen = bottom_up & compared[:, None] & ~live
             alone = (seen.sum(-1, keepdim=True) == 1) & ~dp.any(-1, keepdim=True)
-            back = seen & ~live & alone & dc
+            back = seen & alone & dc
             fired[back] = GROWTH
             fired[back.any(-1, keepdim=True).expand_as(fired) & (fired == UNCERTAINTY)] = STATUS_QUO
         return fired

@@ -64,12 +64,23 @@ from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
 
 MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper -gating": ("paper", ("gating",)),
+          "contextual": ("contextual", ()), "contextual -rules": ("contextual", ("rules",)),
+          "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
+          "contextual -fit": ("contextual", ("fit",)),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
-GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0))}
+GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0)),
+         "contextual +knowledge": ("contextual", ("rules",), None)}
+# the physically right knowledge per context (contextual_rules.CONTEXTS; properties SPLIT_PROPERTIES): a floater
+# displaces its weight, a sinker its volume (fill and size), and whether it floats depends on all three. Given by
+# hand as strengths (3 dominant, 0.05 eliminated), and checked on a life's final knowledge (RIGHT: the letters each
+# context must show, "." where either is right)
+RIGHT = {"floating": "IIIID", "sinking": "IDIDI", "fate": ".D.DD"}
+RIGHT_STRENGTH = [[0.05 if c == "I" else 3.0 if c == "D" else 1.0 for c in RIGHT[k]]
+                  for k in ("floating", "sinking", "fate")]
 LIFE_CHECKS = (8, 24, 64, 230)
 
 
@@ -131,6 +142,9 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     agent = Agent(cfg, batch=B)
     if given is not None:
         agent.hub.strength[:, :len(given)] = torch.tensor(given)
+    elif condition in GIVEN:   # the contextual model: per context
+        agent.rules.strength[:] = torch.tensor(RIGHT_STRENGTH)
+        agent._set_judged_strength(agent.rules.strength_from_knowledge())
     errs = {}
     for t in range(n_train):
         obj = orders[:, t]
@@ -141,7 +155,8 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
             probe = agent.select(torch.arange(B).repeat_interleave(Q))
             p = probe.anticipate({k: v.repeat(B, *([1] * (v.ndim - 1))) for k, v in pmeas.items()})
             errs[t + 1] = rel_errors(p.expected.view(B, Q), truth)
-    return {"errors": errs, "keys": knowledge_keys(agent.rules.state), "state": agent.rules.state.clone()}
+    return {"errors": errs, "keys": knowledge_keys(agent.rules.state), "state": agent.rules.state.clone(),
+            "properties": agent.properties}
 
 
 # the sweep file's set groups (benches/ablation.toml) of the bench's three kinds of set
@@ -160,23 +175,53 @@ def sweep_doc(conditions, plan, first_seed: int) -> dict:
 
 def _task(t):
     torch.set_num_threads(1)
-    if t[0] == "cell":   # an agent condition: the sweep's cell
-        return sweep.run_cell(t[1]["spec"], t[1]["objects"])
+    if t[0] == "cell":   # an agent condition: the sweep's cell, and its wall time
+        t0 = time.perf_counter()
+        table = sweep.run_cell(t[1]["spec"], t[1]["objects"])
+        return table, time.perf_counter() - t0
     return run(*t[1:])
 
 
-def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None):
+def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None, times: dict | None = None):
     """The rows (a pyarrow Table of train.sweep.schema()) of the agent conditions on the plan's sets: the sweep's
-    cells, run on `workers` processes. Equal, row for row, to train/sweep.py on sweep_doc's file."""
+    cells, run on `workers` processes. Equal, row for row, to train/sweep.py on sweep_doc's file. times: filled with
+    {(condition, set group): [each cell's wall time, s]}."""
     import pyarrow as pa
     _, cells = sweep.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         tables = []
-        for t in pool.imap(_task, [("cell", c) for c in cells]):
+        for c, (t, seconds) in zip(cells, pool.imap(_task, [("cell", c) for c in cells])):
             tables.append(t)
+            if times is not None:
+                spec = c["spec"]
+                times.setdefault((spec["condition"]["name"], spec["set_group"]), []).append(seconds)
             if bar is not None:
                 bar.update(1)
     return pa.concat_tables(tables)
+
+
+def final_rows(table, condition: str, group: str) -> list[dict]:
+    """The rows of the condition's runs on a set group at their last episode, as dicts."""
+    import pyarrow.compute as pc
+    m = pc.and_(pc.and_(pc.equal(table.column("condition"), condition), pc.equal(table.column("set_group"), group)),
+                pc.equal(table.column("episode"), table.column("n_train")))
+    return table.filter(m).to_pylist()
+
+
+def right_per_context(key: str | None) -> bool:
+    """A context_knowledge string ("floating:...;sinking:...;fate:...") physically right in every context (RIGHT)."""
+    if not key:
+        return False
+    got = dict(part.split(":") for part in key.split(";"))
+    return all(len(got[c]) == len(w) and all(x == "." or x == y for x, y in zip(w, got[c])) for c, w in RIGHT.items())
+
+
+def context_agreement(table, condition: str, group: str) -> float:
+    """The share of the group's sets whose final knowledge per context is the same in every order."""
+    sets: dict = {}
+    for r in final_rows(table, condition, group):
+        sets.setdefault(r["cell"], set()).add(r["context_knowledge"])
+    return sum(len(v) == 1 for v in sets.values()) / max(len(sets), 1)
 
 
 def final_share(table, condition: str, group: str, prop: str, letter: str) -> float:
@@ -185,7 +230,7 @@ def final_share(table, condition: str, group: str, prop: str, letter: str) -> fl
     m = pc.and_(pc.and_(pc.equal(table.column("condition"), condition), pc.equal(table.column("set_group"), group)),
                 pc.equal(table.column("episode"), table.column("n_train")))
     v = table.filter(m).column(prop).to_pylist()
-    return sum(x == letter for x in v) / len(v)
+    return sum(x == letter for x in v) / max(len(v), 1)
 
 
 def main():
@@ -219,8 +264,9 @@ def main():
              for i in range(n_sets)]
     res = {(kind, c): [None] * n for kind, n, *_ in plan for c in others}
     n_cells = len(agents) * sum(n for _, n, *_ in plan)
+    times: dict = {}
     with Step("(condition, set) runs", len(tasks) + n_cells, unit="run", stream=sys.stderr) as bar:
-        rows = agent_rows(agents, plan, a.first_seed, a.workers, bar) if agents else None
+        rows = agent_rows(agents, plan, a.first_seed, a.workers, bar, times) if agents else None
         with multiprocessing.get_context("fork").Pool(a.workers) as pool:
             for (kind, c, s, *_), r in zip(tasks, pool.imap(_task, tasks)):
                 res[kind, c][s - a.first_seed] = r
@@ -253,15 +299,15 @@ def main():
         if c in PEERS:
             continue
 
-        def share(p, code):
+        def share(prop, code):
             if c in MODELS:
-                prop = ("color", "shape", "size", "weight")[p]
                 return "/".join(f"{final_share(rows, c, GROUPS[k], prop, sweep.KNOWLEDGE_LETTERS[code]):.2f}"
                                 for k in ("8", "24", "life"))
-            parts = [torch.cat([r["state"][:, p] for r in res[k, c]]) for k in ("8", "24", "life")]
+            parts = [torch.cat([r["state"][:, r["properties"].index(prop)] for r in res[k, c]])
+                     for k in ("8", "24", "life")]
             return "/".join(f"{float((x == code).float().mean()):.2f}" for x in parts)
-        print(f"{c:<17}{same('8', c):>10.3f}{same('24', c):>10.3f}  {share(0, IRRELEVANT)}  {share(0, DOMINANT)}  "
-              f"{share(3, IRRELEVANT)}  {share(2, IRRELEVANT)}")
+        print(f"{c:<17}{same('8', c):>10.3f}{same('24', c):>10.3f}  {share('color', IRRELEVANT)}  "
+              f"{share('color', DOMINANT)}  {share('weight', IRRELEVANT)}  {share('size', IRRELEVANT)}")
     print(f"{time.perf_counter() - t0:.0f} s")
 
     def ratio(c, base, kind, n):
@@ -274,6 +320,31 @@ def main():
         if "paper -rules" in conditions:
             line["paper_rules_off_ratio_230"] = ratio("paper -rules", "paper", "life", life_checks[-1])
         line["paper_order_agreement_8"] = same("8", "paper")
+    if "contextual" in conditions:
+        last = life_checks[-1]
+        print("\ncontextual model, knowledge per context (floating / sinking / fate; letters color fill elongation "
+              "size weight):")
+        right = [right_per_context(r["context_knowledge"]) for r in final_rows(rows, "contextual", GROUPS["life"])]
+        for r in final_rows(rows, "contextual", GROUPS["life"])[:8]:
+            print(f"  life {r['set']}: {r['context_knowledge']}")
+        if "paper" in conditions and times.get(("paper", GROUPS["life"])):
+            ratio_t = (statistics.median(times["contextual", GROUPS["life"]])
+                       / statistics.median(times["paper", GROUPS["life"]]))
+            print(f"a life of {a.life_objects} objects: contextual {statistics.median(times['contextual', GROUPS['life']]):.0f} s, "
+                  f"paper {statistics.median(times['paper', GROUPS['life']]):.0f} s (medians over lives, one process "
+                  f"each, side by side): {ratio_t:.2f}x")
+        line["contextual_err_24"] = err("24", "contextual", 24) if a.long_sets else float("nan")
+        line["contextual_err_64"] = err("life", "contextual", 64) if 64 in life_checks else float("nan")
+        line["contextual_err_230"] = err("life", "contextual", last)
+        if "contextual -rules" in conditions:
+            if 64 in life_checks:
+                line["contextual_rules_off_ratio_64"] = ratio("contextual -rules", "contextual", "life", 64)
+            line["contextual_rules_off_ratio_230"] = ratio("contextual -rules", "contextual", "life", last)
+        if "contextual -context" in conditions:
+            line["contextual_context_off_ratio_230"] = ratio("contextual -context", "contextual", "life", last)
+        line["contextual_right_knowledge_230"] = sum(right) / max(len(right), 1)
+        if a.long_sets:
+            line["contextual_order_agreement_24"] = context_agreement(rows, "contextual", GROUPS["24"])
     if "extended" in conditions:
         line["extended_err_8"] = err("8", "extended", 8)
         if "extended -rules" in conditions:

@@ -86,13 +86,13 @@ def summarise(table, spec: dict | None = None) -> dict:
             if orders > 1:
                 k["_multi"] += 1
                 k["_same"] += distinct == 1
-        cols = ("condition", "set_group", "cell", "order", "knowledge", "batch_knowledge")
+        cols = ("condition", "set_group", "cell", "order", "knowledge", "batch_knowledge", "color", "weight")
         answers: dict = {}   # (condition, group) -> {cell: its batch answer}
-        for c, g, cell, _, key, batch in zip(*(final.column(k).to_pylist() for k in cols)):
+        for c, g, cell, _, key, batch, colour, weight in zip(*(final.column(k).to_pylist() for k in cols)):
             k = knowledge[c, g]
             k["_runs"] += 1
-            k["_colour_i"] += key[0] == "I"
-            k["_weight_d"] += key[3] == "D"
+            k["_colour_i"] += colour == "I"
+            k["_weight_d"] += weight == "D"
             if batch is not None:
                 k["_batched"] += 1
                 k["_equal"] += key == batch

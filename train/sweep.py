@@ -50,7 +50,8 @@ MAX_ORDERS = 100_000     # orders of one cell (one batched agent)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer
 KNOWLEDGE_LETTERS = "ULDI"   # train.summary.KNOWLEDGE_LETTERS: one per aesop_torch.rules.STATES code
 RULE_LETTERS = "SEGU"        # aesop_torch.rules.RULE_NAMES
-PROPERTY_COLUMNS = ("color", "shape", "size", "weight")   # aesop_torch.rules.PROPERTIES
+# aesop_torch.encoders.OBJECT_PROPERTIES: a model has the paper's four or the split five (null in the others)
+PROPERTY_COLUMNS = ("color", "shape", "fill", "elongation", "size", "weight")
 
 TOP_KEYS = ("description", "world", "conditions", "sets")
 CONDITION_KEYS = ("name", "model", "ablate", "overrides")
@@ -407,7 +408,8 @@ def schema():
         ("n_orders", pa.int32()), ("order", pa.int32()), ("episode", pa.int32()), ("object", pa.string()),
         ("predicted_cm3", pa.float64()), ("observed_cm3", pa.float64()), ("archimedes_cm3", pa.float64()),
         ("sank", pa.bool_()), ("goal_reached", pa.bool_()), ("rules", pa.string()), ("knowledge", pa.string()),
-        *[(p, pa.string()) for p in PROPERTY_COLUMNS], ("probe_rel_error", pa.float64()),
+        *[(p, pa.string()) for p in PROPERTY_COLUMNS], ("context_knowledge", pa.string()),
+        ("probe_rel_error", pa.float64()),
         ("batch_knowledge", pa.string()), ("stored", pa.int32()), ("recalled", pa.float64()),
         ("probe_errors", pa.list_(pa.float64())), ("probe_floors", pa.list_(pa.float64()))])
 
@@ -446,7 +448,7 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         B, Q = orders.shape[0], len(pnames)
         agent = Agent(agent_config(cell["condition"], cell["seed"], n), batch=B)
         checks = set(cell["checks"])
-        predicted, fired, state, stored = [], [], [], []
+        predicted, fired, state, stored, by_context = [], [], [], [], []
         probe_err = torch.full((n, B), float("nan"), dtype=torch.float64)
         recalled = torch.full((n, B), float("nan"), dtype=torch.float64)
         per_probe = {}   # episode index -> (B, Q) each probe's error
@@ -461,6 +463,8 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
             predicted.append(res.expected.double())
             fired.append(res.rules_fired().clone())
             state.append(agent.rules.state.clone())
+            if hasattr(agent.rules, "context_state"):   # knowledge kept per context (contextual_rules.CONTEXTS)
+                by_context.append(agent.rules.context_state.clone())
             stored.append(agent.memory.count.clone())
             if t + 1 in checks and Q:
                 probe = agent.select(torch.arange(B).repeat_interleave(Q))
@@ -482,6 +486,13 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
     fired_codes = torch.stack(fired).permute(1, 0, 2).reshape(B * n, -1).tolist()
     state_codes = torch.stack(state).permute(1, 0, 2).reshape(B * n, -1).tolist()
     knowledge = ["".join(KNOWLEDGE_LETTERS[c] for c in row) for row in state_codes]
+    props = list(agent.properties)
+    context_knowledge = [None] * (B * n)
+    if by_context:   # "floating:LETTERS;sinking:LETTERS;fate:LETTERS", one letter per property as `knowledge`
+        names_c = agent.rules.contexts
+        codes = torch.stack(by_context).permute(1, 0, 2, 3).reshape(B * n, len(names_c), -1).tolist()
+        context_knowledge = [";".join(f"{c}:" + "".join(KNOWLEDGE_LETTERS[x] for x in row)
+                                      for c, row in zip(names_c, rows)) for rows in codes]
     arch = np.array([outcomes[k]["archimedes_cm3"] for k in names])
     cond, N = cell["condition"], B * n
     col = lambda v, typ: pa.array([v] * N, typ)
@@ -505,7 +516,9 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         "goal_reached": pa.array(ep["goal_after"].numpy()[obj_idx].reshape(-1).astype(bool), pa.bool_()),
         "rules": pa.array(["".join(RULE_LETTERS[c] for c in row) for row in fired_codes], pa.string()),
         "knowledge": pa.array(knowledge, pa.string()),
-        **{p: pa.array([k[i] for k in knowledge], pa.string()) for i, p in enumerate(PROPERTY_COLUMNS)},
+        **{p: pa.array([k[props.index(p)] if p in props else None for k in knowledge], pa.string())
+           for p in PROPERTY_COLUMNS},
+        "context_knowledge": pa.array(context_knowledge, pa.string()),
         "probe_rel_error": pa.array(perr, pa.float64(), mask=np.isnan(perr)),
         "batch_knowledge": col(batch, pa.string()),
         "stored": pa.array(flat(torch.stack(stored).numpy()), pa.int32()),
