@@ -90,6 +90,12 @@ class AgentConfig:
     # the wrist's noise on the felt mass (sim/world.py WorldConfig.mass_noise_g): a light object's weight is only
     # called changed beyond 3 sigma of it (added to the weight bounds, as a relative difference of its mass)
     felt_mass_noise_g: float = 1.0
+    # ... and unchanged within the weight band's lower bound plus this many sigmas of that noise (relative to the
+    # lighter mass). The paper model: +1 (unchanged within 1 sigma). The contextual model: -2, unchanged only when the
+    # felt masses agree beyond their noise: two 9 g floaters felt alike can weigh 15 % apart, and their rewards
+    # (their masses) then differ past the contradiction's 20 %, a Growth on whatever else changed (size among
+    # floaters, tuning seed 1000); such a weight is left in its dead zone instead, and the comparison out
+    weight_unchanged_sigmas: float = 1.0
     # a readout fit that reads the mass weighs an episode by how well its mass was felt, m^2 / (m^2 + (noise /
     # this)^2): the wrist's 1 g is 12 % of an 8 g floater, far more than the ~2 % the camera's volume is known to
     # (three extents at ~0.7 % and the fill at ~0.9 %, sim.sensor_model), which sets the scale. Median novel-object
@@ -192,7 +198,7 @@ class AgentConfig:
         free to grow an eliminated pathway back; recall in two steps (the fate, then the reward within it) and a
         local fit over the recalled episodes of the expected fate."""
         kw = {"model": "contextual", "learning": "contextual", "readout": "local_fit", "compare_with": None,
-              "delta_p_band": SPLIT_DELTA_BAND, **kw}
+              "delta_p_band": SPLIT_DELTA_BAND, "weight_unchanged_sigmas": -2.0, **kw}
         kw.setdefault("encoder", EncoderConfig(properties=SPLIT_PROPERTIES))
         return cls(**kw)
 

@@ -54,7 +54,8 @@ def delta_property(values: dict, recalled: dict, config, strength: torch.Tensor 
     for i, p in enumerate(config.properties):
         lo, hi = config.delta_p_band[i]
         if p == "weight":
-            lo, hi = lo + noise / 3, hi + noise   # unchanged within 1 sigma of the felt mass, changed beyond 3
+            # unchanged within weight_unchanged_sigmas sigma of the felt mass, changed beyond 3
+            lo, hi = (lo + config.weight_unchanged_sigmas * noise / 3).clamp_min(0.0), hi + noise
         gap = torch.nan_to_num(gaps[p], nan=0.0)
         changed.append(gap > hi)
         unclear.append((gap > lo) & (gap <= hi))
@@ -139,6 +140,8 @@ def compare(a, stored: torch.Tensor, fate: torch.Tensor, learn: torch.Tensor, co
             dp, unclear = delta_property(a.values, recalled_k, config, gate[:, None])
             on = compared[:, k] & applies
             use = on & ~cannot_tell(unclear[:, 0], dc, unclear_c)
+            if regrow:   # contextual: a property in its dead zone may have cancelled a change (larger but hollower)
+                use &= ~unclear[:, 0].any(-1)
             dp = dp[:, 0] & use[:, None]
             delta_p[:, k] |= dp
             delta_c[:, k] |= dc & on

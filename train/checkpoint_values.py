@@ -71,7 +71,7 @@ def _agent_values_problem(e: dict) -> str | None:
     - maps' locations: the grid the map's config gives (rebuilt, never learned);
     - pathway strengths in [0, max(1, rules.dominant_strength)]: they start at 1, Growth raises them up to the
       dominant strength, Elimination and Uncertainty only lower them;
-    - the hub's branches in 0..1 (map activities) and their norms at most sqrt(units);
+    - the hub's branches in 0..1 (map activities) and their energies (sums of squares) at most the units;
     - episodes stored (memory.count) at most the records' encoded episodes; assemblies at most t; a neuron's usage at
       most the assemblies; rules fired once per property and episode, Uncertainty counted once per comparison (at most
       t * t); states codes of rules.STATES."""
@@ -91,16 +91,21 @@ def _agent_values_problem(e: dict) -> str | None:
                     f"({float(v.min()):g} .. {float(v.max()):g})")
         return None
 
-    for name, map_config in default_map_configs().items():
+    from aesop_torch.encoders import EncoderConfig
+    for name, map_config in default_map_configs(EncoderConfig(**cfg["encoder"])).items():
         if p := within(f"maps.{name}.weights", 0.0, 1.0):
             return p
         if not torch.equal(a[f"maps.{name}.locations"], SelfOrganizingMap(map_config).locations):
             return f"agent state 'maps.{name}.locations' is not the map's grid"
     checks = [("hub.strength", 0.0, top), ("hub.branches", 0.0, 1.0),
-              ("hub.branch_norm", 0.0, math.sqrt(a["hub.branches"].shape[-1])), ("memory.count", 0, t),
+              ("hub.branch_norm", 0.0, float(a["hub.branches"].shape[-1])), ("memory.count", 0, t),
               ("hub.n_assemblies", 0, t), ("hub.usage", 0, t), ("rules.state", 0, len(STATES) - 1)]
-    if "rules.strength" in a:   # the paper model's rules
-        checks += [("rules.strength", 0.0, top), ("rules.fired", 0, t)]
+    # the rules fire once per property and episode (paper), or once per comparison, with each recalled episode, in
+    # each context (contextual: fired (B, contexts, P, 4), up to t * t)
+    per_comparison = "rules.fired" in a and a["rules.fired"].dim() == 4
+    fired_max = t * t if per_comparison else t
+    if "rules.strength" in a:   # the paper and contextual models' rules
+        checks += [("rules.strength", 0.0, top), ("rules.fired", 0, fired_max)]
     if "rules.uncertain_count" in a:   # the extended model's: once per comparison, an episode against each recalled
         checks += [("rules.uncertain_count", 0, t * t)]   # one (at most t of them), so up to t * t
     for key, lo, hi in checks:
@@ -111,6 +116,6 @@ def _agent_values_problem(e: dict) -> str | None:
                 f"{encoded.tolist()} (t = {t})")
     if (a["hub.usage"] > n_assemblies[:, None]).any():
         return "a hub neuron is used by more assemblies than the hub holds"
-    if "rules.fired" in a and (a["rules.fired"].sum(-1) > t).any():
-        return f"the rules fired more than once per property in {t} episode(s)"
+    if "rules.fired" in a and (a["rules.fired"].sum(-1) > fired_max).any():
+        return f"the rules fired more than {'t * t' if per_comparison else 'once'} per property in {t} episode(s)"
     return None

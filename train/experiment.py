@@ -293,7 +293,7 @@ def _imagined(exp_agent, im, b: int) -> dict:
     v = {p: im.values[p][b].tolist() for p in im.values}
     rgb = v["color"]
     colour = min(PALETTE, key=lambda n: sum((x - y) ** 2 for x, y in zip(PALETTE[n], rgb)))
-    fill, r1, r2 = v["shape"]
+    fill, r1, r2 = v["shape"] if "shape" in v else v["fill"] + v["elongation"]   # the paper's shape, or split
     kinds = {"cube": (1.0, 1.0, 1.0), "box": (1.0, r1, r2), "cylinder": (SHAPE_FILL["cylinder"], r1, r2),
              "sphere": (SHAPE_FILL["sphere"], 1.0, 1.0)}
     kind = min(kinds, key=lambda k: sum((x - y) ** 2 for x, y in zip(kinds[k], (fill, r1, r2)))
@@ -308,7 +308,7 @@ def _imagined(exp_agent, im, b: int) -> dict:
     return {**out,
             "color": {"rgb": [round(x, 3) for x in rgb], "nearest": colour, "unit": unit("color")},
             "shape": {"fill": round(fill, 3), "ratios": [round(r1, 3), round(r2, 3)], "kind": kind,
-                      "unit": unit("shape")},
+                      "unit": unit("shape" if "shape" in v else "fill")},
             "size": {"cm": round(size, 2), "unit": unit("size")},
             "weight": {"g": round(mass, 1), "unit": unit("weight")},
             "expected_cm3": None if math.isnan(exp) else round(exp, 2)}
