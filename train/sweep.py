@@ -476,7 +476,8 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         batch = None
         if n <= BATCH_MAX_TRAIN:   # the batch answer: every pair of the set's episodes compared at once
             from aesop_torch.rules import batch_knowledge
-            codes = batch_knowledge(*agent.pairwise_evidence(meas, observed.float(), ep["sank"]), agent.config.rules)
+            codes = batch_knowledge(*agent.pairwise_evidence(meas, observed.float(), ep["sank"]), agent.config.rules,
+                                    properties=agent.properties)
             batch = "".join(KNOWLEDGE_LETTERS[c] for c in codes.tolist())
     # rows order by order, episode by episode: (n, B) -> (B, n) -> flat
     flat = lambda x: np.ascontiguousarray(np.asarray(x).T).reshape(-1)
