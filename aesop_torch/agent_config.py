@@ -96,6 +96,11 @@ class AgentConfig:
     # (their masses) then differ past the contradiction's 20 %, a Growth on whatever else changed (size among
     # floaters, tuning seed 1000); such a weight is left in its dead zone instead, and the comparison out
     weight_unchanged_sigmas: float = 1.0
+    # leave out every comparison with a property in its dead zone, held or not (cannot_tell leaves out only the
+    # contradicted ones): a fill change beside a size change too small to call one can cancel, larger but hollower.
+    # Off in every model: on, the contextual model learned nothing in 24 objects (every random pair has some property
+    # in its dead zone) and its error after 24 rose from 12-33 % to 24-29 % (tuning seeds 1000-1002)
+    strict_comparisons: bool = False
     # a readout fit that reads the mass weighs an episode by how well its mass was felt, m^2 / (m^2 + (noise /
     # this)^2): the wrist's 1 g is 12 % of an 8 g floater, far more than the ~2 % the camera's volume is known to
     # (three extents at ~0.7 % and the fill at ~0.9 %, sim.sensor_model), which sets the scale. Median novel-object

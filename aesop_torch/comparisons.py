@@ -140,7 +140,7 @@ def compare(a, stored: torch.Tensor, fate: torch.Tensor, learn: torch.Tensor, co
             dp, unclear = delta_property(a.values, recalled_k, config, gate[:, None])
             on = compared[:, k] & applies
             use = on & ~cannot_tell(unclear[:, 0], dc, unclear_c)
-            if regrow:   # contextual: a property in its dead zone may have cancelled a change (larger but hollower)
+            if config.strict_comparisons:   # a property in its dead zone may have cancelled a change
                 use &= ~unclear[:, 0].any(-1)
             dp = dp[:, 0] & use[:, None]
             delta_p[:, k] |= dp
