@@ -345,6 +345,45 @@ def test_an_address_nothing_listens_on_is_refused_in_one_line(finished, tmp_path
     assert not (tmp_path / "out").exists()
 
 
+@pytest.fixture
+def refusing_gcs():
+    """A gRPC server that refuses every call as a Ray cluster with token authentication refuses a driver without
+    the token (status UNAUTHENTICATED, Ray's own message); its port. On every interface: Ray dials the node's address
+    for 127.0.0.1."""
+    from concurrent import futures
+
+    import grpc
+
+    class Refuse(grpc.GenericRpcHandler):
+        def service(self, details):
+            def deny(request, context):
+                context.abort(grpc.StatusCode.UNAUTHENTICATED, "Invalid or missing authentication token")
+            return grpc.unary_unary_rpc_method_handler(deny)
+
+    server = grpc.server(futures.ThreadPoolExecutor(max_workers=2))
+    server.add_generic_rpc_handlers((Refuse(),))
+    port = server.add_insecure_port("0.0.0.0:0")
+    server.start()
+    yield port
+    server.stop(0)
+
+
+@pytest.mark.timeout(90)
+def test_a_cluster_that_refuses_the_sweep_without_a_token_is_named_in_one_line(finished, tmp_path, refusing_gcs):
+    """What Ray prints for it (a screenful of 'Unauthenticated: RPC error' lines, then 'Failed to connect to Ray
+    cluster') becomes one line naming RAY_AUTH_MODE=token; Ray's retries cut to 2 here to keep the test short."""
+    env = {**os.environ, "RAY_NUM_REDIS_GET_RETRIES": "2"}
+    env.pop("RAY_AUTH_MODE", None)
+    r = subprocess.run([sys.executable, "train/sweep.py", str(finished[0]), "--out", str(tmp_path / "out"),
+                        "--address", f"127.0.0.1:{refusing_gcs}"], cwd=ROOT, capture_output=True, text=True,
+                       timeout=80, env=env, stdin=subprocess.DEVNULL)
+    assert r.returncode == 2 and r.stderr.splitlines() == [
+        f"train/sweep.py: error: cannot join Ray at 127.0.0.1:{refusing_gcs}: the cluster requires token "
+        f"authentication: set RAY_AUTH_MODE=token (and its token: RAY_AUTH_TOKEN or ~/.ray/auth_token) and run the "
+        f"sweep again"], r.stderr
+    assert not (tmp_path / "out").exists()
+
+
 def test_a_refused_authentication_is_named_with_its_fix():
     import ray
     auth = ray.exceptions.AuthenticationError("Authentication failed: UNAUTHENTICATED")
