@@ -397,3 +397,25 @@ def test_a_refused_authentication_is_named_with_its_fix():
     other = sweep._join_failure("10.0.0.5:6379", RuntimeError("Version mismatch: 2.9 and 2.60\nmore"), "")
     assert other.startswith("cannot join Ray at 10.0.0.5:6379: Version mismatch: 2.9 and 2.60; ") and "\n" not in other
     assert "RAY_AUTH_MODE=token" in other
+
+
+# -- 8. the docs' examples ------------------------------------------------------------------------------------------
+
+def test_the_docs_python_example_runs_on_a_tiny_sweeps_output(tmp_path, local_ray, capsys):
+    """docs/sweeps.md's "Reading the rows" block, run as written (pyarrow only) on examples/tiny.toml's sweep."""
+    out = tmp_path / "sweep-tiny"
+    assert sweep.main([str(ROOT / "examples" / "tiny.toml"), "--out", str(out)]) == 0
+    capsys.readouterr()
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    blocks = [b.split("```")[0] for b in text.split("```python\n")[1:]]
+    assert len(blocks) == 1 and 'DIR = "runs/sweep-tiny"\n' in blocks[0] and "pandas" not in blocks[0]
+    exec(compile(blocks[0].replace('DIR = "runs/sweep-tiny"', f"DIR = {str(out)!r}"), "docs/sweeps.md", "exec"), {})
+    lines = capsys.readouterr().out.splitlines()
+    rows = sweep.read_cells(out)
+    final = [r for r in rows.to_pylist() if r["episode"] == r["n_train"]]
+    assert lines[:len(final)] == [f"{r['condition']} {r['set']} {r['seed']} {r['order']} {r['knowledge']}"
+                                  for r in final]
+    at4 = [r["probe_rel_error"] for r in final if r["condition"] == "paper"]
+    assert f"paper: after 4 episodes, 4 runs, mean error {100 * sum(at4) / 4:.1f} %" in lines
+    assert lines[-1].startswith(json.loads((out / "sweep.json").read_text())["runs"][0]["started"] + " ")
+    assert lines[-1].endswith(" finished " + sweep.commit() + " " + sweep.versions()["torch"])
