@@ -110,3 +110,12 @@ def test_a_swapped_cell_file_is_refused_and_a_foreign_one_left_out(swept, capsys
     assert err[-1] == (f"train.report: error: {swept / 'cells' / 'idle100000000000.parquet'}: holds the rows of "
                        f"cell idle000000000000, not idle100000000000 (renamed?); `python train/sweep.py SWEEP.toml "
                        f"--out {swept} --resume` runs its cell again")
+
+
+@pytest.mark.timeout(60)
+def test_a_sweep_record_that_is_a_fifo_is_refused_at_once(swept, capsys):
+    import os
+    os.mkfifo(swept / "sweep.json")
+    assert report_mod.main([str(swept)]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"train.report: error: {swept / 'sweep.json'}: is a FIFO (named pipe), not a sweep record (a regular file)"]

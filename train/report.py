@@ -421,12 +421,19 @@ def report(out: Path, warn=None) -> dict:
     if not out.is_dir():
         raise ReportError(f"{out} is not a directory")
     spec, ids = None, None
-    try:
-        record = json.loads((out / "sweep.json").read_text())
-        spec = record["spec"]
-        ids = set(record["cells"]) if isinstance(record.get("cells"), list) else None
-    except (OSError, ValueError, KeyError, TypeError):
-        pass   # the order of conditions then follows the rows, and every file counts
+    recorded = out / "sweep.json"
+    if recorded.exists() or recorded.is_symlink():   # a regular file of bounded size: not /dev/zero, not a FIFO
+        from train.sweep import MAX_RECORD_BYTES, SweepError, read_bounded
+        try:
+            raw = read_bounded(recorded, MAX_RECORD_BYTES, "a sweep record")
+        except SweepError as e:
+            raise ReportError(str(e)) from None
+        try:
+            record = json.loads(raw)
+            spec = record["spec"]
+            ids = set(record["cells"]) if isinstance(record.get("cells"), list) else None
+        except (ValueError, KeyError, TypeError, RecursionError):
+            pass   # the order of conditions then follows the rows, and every file counts
     files = sorted((out / "cells").glob("*.parquet"))
     if ids is not None:
         for f in files:

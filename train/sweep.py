@@ -759,7 +759,10 @@ def check_cell_file(path: Path, cell: dict | None = None) -> str | None:
     the file reads and its rows are the cell of its name."""
     import numpy as np
     try:
-        if path.stat().st_size == 0:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            return "not a regular file"
+        if st.st_size == 0:
             return "empty (0 bytes)"
         table = read_cell(path)
     except Exception as e:   # noqa: BLE001  pyarrow's reasons are many (ArrowInvalid, OSError, ...)
