@@ -419,3 +419,16 @@ def test_the_docs_python_example_runs_on_a_tiny_sweeps_output(tmp_path, local_ra
     assert f"paper: after 4 episodes, 4 runs, mean error {100 * sum(at4) / 4:.1f} %" in lines
     assert lines[-1].startswith(json.loads((out / "sweep.json").read_text())["runs"][0]["started"] + " ")
     assert lines[-1].endswith(" finished " + sweep.commit() + " " + sweep.versions()["torch"])
+
+
+@pytest.mark.parametrize("content, words", [
+    ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ("{}", "KeyError: 'spec'"),
+    ("x", "JSONDecodeError: Expecting value: line 1 column 1 (char 0)"),
+])
+def test_a_damaged_sweep_record_is_refused_on_resume_in_one_line(finished, tmp_path, capsys, content, words):
+    out = _copy(finished, tmp_path)
+    (out / "sweep.json").write_text(content)
+    assert sweep.main([str(finished[0]), "--out", str(out), "--resume"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        f"train/sweep.py: error: --resume: cannot read {out / 'sweep.json'}: {words}"]

@@ -897,8 +897,9 @@ def check_out(out: Path, spec: dict, resume: bool) -> dict | None:
             old = record["spec"]
         except SweepError as e:
             raise SweepError(f"--resume: {e}") from None
-        except (ValueError, KeyError, TypeError) as e:
-            raise SweepError(f"--resume: cannot read {recorded}: {type(e).__name__}: {e}") from None
+        except (ValueError, KeyError, TypeError, RecursionError) as e:
+            why = "nested too deeply" if isinstance(e, RecursionError) else f"{type(e).__name__}: {e}"
+            raise SweepError(f"--resume: cannot read {recorded}: {why}") from None
         if old != json.loads(json.dumps(spec)):
             raise SweepError(f"--resume: {out} holds another sweep ({_first_difference(old, spec)} differs); give "
                              f"another --out")
@@ -1179,7 +1180,7 @@ def _write_configs(out: Path, cells: list[dict]) -> None:
         try:
             old = json.loads(read_bounded(path, MAX_RECORD_BYTES, "a configs record"))
             configs = old if isinstance(old, dict) else {}
-        except (SweepError, ValueError):
+        except (SweepError, ValueError, RecursionError):
             pass   # damaged: written anew from the cells
     for c in cells:
         record = config_record(c["spec"])
