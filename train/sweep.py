@@ -989,6 +989,10 @@ def start_ray(address: str | None, workers: int | None) -> bool:
                 ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR, job_config=job)
             except Exception as e:   # noqa: BLE001  Ray's reasons are many (ConnectionError, AuthenticationError, ...)
                 raise JoinError(_join_failure(address, e, said())) from None
+            text = said()
+        if text:   # joined: what Ray said on the way (its warnings) is passed on as it was
+            sys.stderr.write(text)
+            sys.stderr.flush()
         return True
     from train.physics import cores
     # "local": a new instance of this process's own, even where a cluster runs (ray.init() would join that)
