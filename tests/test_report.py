@@ -70,7 +70,7 @@ def test_the_same_rows_give_the_same_report_with_every_count_named(swept):
     by = {line.split(",")[0]: dict(zip(header, line.split(","))) for line in csv[1:]}   # no spec: in file order
     assert list(by) == ["idle", "learns"]
     row = by["learns"]
-    assert (row["condition"], row["sets"], row["runs"], row["cells"], row["cell_runs"]) == ("learns", "2", "4", "2", "4")
+    assert [row[k] for k in ("condition", "sets", "runs", "cells", "cell_runs")] == ["learns", "2", "4", "2", "4"]
     idle = by["idle"]
     assert (idle["sets"], idle["runs"], idle["order_agreement_pct"], idle["nothing_learned"]) == ("3", "6", "100.00",
                                                                                                  "yes")

@@ -56,7 +56,7 @@ MAX_SWEEP_BYTES = 1_000_000     # a sweep file: the shipped ones are under 2 kB 
                                 # needs a few lines; a file far larger is no sweep file (/dev/zero: read no further)
 MAX_RECORD_BYTES = 1 << 30      # DIR/sweep.json and DIR/configs.json as this program writes them (the largest
                                 # legal sweep, 1,000,000 cells, records well under this; see docs/sweeps.md)
-MAX_NESTING = 16                # tables and lists in tables: a sweep file needs 6 (conditions[].overrides.a.b = [[]])
+MAX_NESTING = 16                # tables and lists in tables: the shipped sweep files nest 5 deep
 KNOWLEDGE_LETTERS = "ULDI"   # train.summary.KNOWLEDGE_LETTERS: one per aesop_torch.rules.STATES code
 RULE_LETTERS = "SEGU"        # aesop_torch.rules.RULE_NAMES
 PROPERTY_COLUMNS = ("color", "shape", "size", "weight")   # aesop_torch.rules.PROPERTIES
@@ -338,11 +338,11 @@ def _toml_error(message: str, text: str) -> str:
     if not first.startswith("Cannot overwrite a value"):
         return first
     lines = text.splitlines()
+    part = r"""(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')"""   # a bare, "basic" or 'literal' key
     at = re.search(r"at line (\d+)", first)
     end = int(at.group(1)) if at else len(lines)
     for i in range(min(end, len(lines)) - 1, -1, -1):
-        m = re.match(r"\s*((?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|\"[^\"]*\"|'[^']*'))*)\s*=",
-                     lines[i])
+        m = re.match(rf"\s*({part}(?:\s*\.\s*{part})*)\s*=", lines[i])
         if m:
             return f"the key {m.group(1)} is given twice (line {i + 1}; a key may be set once per table)"
     return first
@@ -502,7 +502,8 @@ def schema():
     import pyarrow as pa
     return pa.schema([
         ("cell", pa.string()), ("condition", pa.string()), ("model", pa.string()), ("ablate", pa.string()),
-        ("overrides", pa.string()), ("config", pa.string()), ("world", pa.string()), ("set_group", pa.string()), ("set", pa.string()),
+        ("overrides", pa.string()), ("config", pa.string()), ("world", pa.string()), ("set_group", pa.string()),
+        ("set", pa.string()),
         ("generator_seed", pa.int64()), ("seed", pa.int64()), ("n_train", pa.int32()), ("n_probe", pa.int32()),
         ("n_orders", pa.int32()), ("order", pa.int32()), ("episode", pa.int32()), ("object", pa.string()),
         ("predicted_cm3", pa.float64()), ("observed_cm3", pa.float64()), ("archimedes_cm3", pa.float64()),
