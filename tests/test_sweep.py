@@ -286,15 +286,15 @@ def test_the_runner_refuses_eight_objects_through_a_refusing_memory_of_four_in_o
 def test_cells_are_named_by_a_stable_hash_of_their_spec(tmp_path):
     _, cells = sweep.load_sweep(_write(tmp_path, TINY))
     assert len({c["id"] for c in cells}) == 4
-    spec = {"format": 2, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
+    spec = {"format": 3, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
                                                                 "overrides": {}},
             "set_group": "fours", "set": "5", "source": {"generate": {"seed": 5, "train": 4, "probe": 3,
                                                                       "pairs": False, "jar": "random"}},
             "n_train": 4, "n_probe": 3, "seed": 5, "orders": "2", "checks": [1, 3, 4]}
     assert spec in [c["spec"] for c in cells]
     # fixed: a resumed sweep finds the cells an older run wrote (format 1's rows, without the batch answer, memory
-    # and per-probe columns, were "adf20a285d537c59")
-    assert sweep.cell_id(spec) == "0d2ac7d39c86682e"
+    # and per-probe columns, were "adf20a285d537c59"; format 2's, without the config column, "0d2ac7d39c86682e")
+    assert sweep.cell_id(spec) == "3ef18f6bc10cafcd"
 
 
 def _hand_made_table():
@@ -324,14 +324,19 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
         sweep.write_cell(tmp_path, cell, table.filter(pc.equal(table.column("cell"), cell)))
     assert report_mod.main([str(tmp_path)]) == 0
     csv = (tmp_path / "report.csv").read_text().splitlines()
-    assert csv == ["condition,set_group,episode,n,error_median,error_q25,error_q75,floor,over_floor,probes_over_2pts,"
-                   "stored,recalled,runs_fell,runs_rose,change_median,cells,order_agreement,colour_irrelevant,"
-                   "weight_dominant,equals_batch",
-                   "a,g,2,4,0.250000,0.175000,0.325000,,,,,,,,,2,0.5000,0.7500,1.0000,",
-                   "b,g,2,4,2.500000,1.750000,3.500000,,,,,,,,,2,1.0000,0.0000,0.0000,"]
+    # per condition: the median of its 4 runs, a 95 % interval from resampling its 2 sets (a: sets of 0.1, 0.2 and
+    # 0.3, 0.4 give medians 0.15, 0.25, 0.35, each drawn pair of sets a quarter of the time or more: 15-35 %), the
+    # runs' 25-75 % range, and the knowledge shares; b learned nothing: its 100 % agreement is marked
+    assert csv == ["condition,set_group,episode,sets,runs,error_median_pct,error_ci95_lo_pct,error_ci95_hi_pct,"
+                   "error_q25_pct,error_q75_pct,floor_pct,over_floor_pct,probes_over_2pts,stored,recalled,runs_fell,"
+                   "runs_rose,change_median_pct,cells,cell_sets,cell_runs,order_agreement_pct,nothing_learned,"
+                   "colour_irrelevant_pct,weight_dominant_pct,equals_batch_pct",
+                   "a,g,2,2,4,25.0000,15.0000,35.0000,17.5000,32.5000,,,,,,,,,2,2,4,50.00,no,75.00,100.00,",
+                   "b,g,2,2,4,250.0000,150.0000,400.0000,175.0000,350.0000,,,,,,,,,2,2,4,100.00,yes,0.00,0.00,"]
     md = (tmp_path / "report.md").read_text()
-    assert "| a | 0.2500 (0.175-0.325) |" in md and "| b | 2.5000 (1.750-3.500) |" in md
-    assert "| a | g | 2 | 0.500 | 0.750 |" in md
+    assert "| condition | sets | runs | after 2 episodes |" in md
+    assert "| a | 2 | 4 | 25.0 % [15.0-35.0] |" in md and "| b | 2 | 4 | 250.0 % [150.0-400.0] |" in md
+    assert "| a | g | 2 | 2 | 4 | 50.0 % | 75.0 % |" in md and "| b | g | 2 | 2 | 4 | 100.0 % (nothing learned) |" in md
     for png in ("errors.png", "agreement.png"):
         data = (tmp_path / png).read_bytes()
         assert data[:8] == b"\x89PNG\r\n\x1a\n" and len(data) > 5000

@@ -24,13 +24,17 @@ a new DIR.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import hashlib
 import json
 import math
 import os
 import signal
+import socket
+import stat
 import sys
 import tempfile
+import threading
 import time
 from pathlib import Path
 
@@ -39,8 +43,8 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
 
 ROOT = Path(__file__).resolve().parents[1]
 PROG = "train/sweep.py"
-FORMAT = 2               # in every cell's hash: bumped when the rows a spec gives change (2: batch_knowledge,
-                         # stored, recalled, probe_errors, probe_floors)
+FORMAT = 3               # in every cell's hash: bumped when the rows a spec gives change (2: batch_knowledge,
+                         # stored, recalled, probe_errors, probe_floors; 3: config)
 BATCH_MAX_TRAIN = 500    # the batch answer compares every pair of a set's train objects: up to this many
 WORLDS = ("closed_form", "closed_form_exact", "physics")
 from train.run import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables and rules, without torch
@@ -48,6 +52,11 @@ MAX_CELLS = 1_000_000
 MAX_SEEDS = 1_000_000    # seeds of one range
 MAX_ORDERS = 100_000     # orders of one cell (one batched agent)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer
+MAX_SWEEP_BYTES = 1_000_000     # a sweep file: the shipped ones are under 2 kB and a sweep of a million cells
+                                # needs a few lines; a file far larger is no sweep file (/dev/zero: read no further)
+MAX_RECORD_BYTES = 1 << 30      # DIR/sweep.json and DIR/configs.json as this program writes them (the largest
+                                # legal sweep, 1,000,000 cells, records well under this; see docs/sweeps.md)
+MAX_NESTING = 16                # tables and lists in tables: the shipped sweep files nest 5 deep
 KNOWLEDGE_LETTERS = "ULDI"   # train.summary.KNOWLEDGE_LETTERS: one per aesop_torch.rules.STATES code
 RULE_LETTERS = "SEGU"        # aesop_torch.rules.RULE_NAMES
 # aesop_torch.encoders.OBJECT_PROPERTIES: a model has the paper's four or the split five (null in the others)
@@ -285,6 +294,61 @@ def _set(s, where: str, base: Path, names: set) -> tuple[dict, list[dict]]:
     return spec, found
 
 
+def read_bounded(path, limit: int, what: str) -> bytes:
+    """A file's bytes, if it is a regular file of at most `limit` bytes; SweepError (one line) otherwise. Opened
+    without blocking (a FIFO must not wait for a writer) and read no further than the limit (/dev/zero never ends)."""
+    try:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+    except OSError as e:
+        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
+    try:
+        with os.fdopen(fd, "rb") as f:
+            mode = os.fstat(f.fileno()).st_mode
+            if not stat.S_ISREG(mode):
+                kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+                        "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
+                        else "no regular file")
+                raise SweepError(f"{path}: is {kind}, not {what} (a regular file)")
+            raw = f.read(limit + 1)
+    except OSError as e:
+        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
+    if len(raw) > limit:
+        raise SweepError(f"{path}: larger than {limit:,} bytes, too large for {what}")
+    return raw
+
+
+def _depth(doc) -> int:
+    """How deep tables and lists nest in a parsed document (a list of scalars inside the top table: 2), counted up
+    to MAX_NESTING + 1. Without recursion: dotted keys a.b.c... parse flat, however deep they nest."""
+    deepest, stack = 0, [(doc, 1)]
+    while stack:
+        v, d = stack.pop()
+        deepest = max(deepest, d)
+        if d > MAX_NESTING:
+            break
+        children = v.values() if isinstance(v, dict) else v
+        stack.extend((c, d + 1) for c in children if isinstance(c, (dict, list)))
+    return deepest
+
+
+def _toml_error(message: str, text: str) -> str:
+    """tomllib's message, first line, with the key named when it says only 'Cannot overwrite a value' (a key given
+    twice): the key of the last `key = value` line at or before the place it points to."""
+    import re
+    first = message.splitlines()[0]
+    if not first.startswith("Cannot overwrite a value"):
+        return first
+    lines = text.splitlines()
+    part = r"""(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')"""   # a bare, "basic" or 'literal' key
+    at = re.search(r"at line (\d+)", first)
+    end = int(at.group(1)) if at else len(lines)
+    for i in range(min(end, len(lines)) - 1, -1, -1):
+        m = re.match(rf"\s*({part}(?:\s*\.\s*{part})*)\s*=", lines[i])
+        if m:
+            return f"the key {m.group(1)} is given twice (line {i + 1}; a key may be set once per table)"
+    return first
+
+
 def load_sweep(path: Path) -> tuple[dict, list[dict]]:
     """Read and check a sweep file: (the resolved spec, the cells in the order they are to run). Each cell is
     {"id", "spec" (what its id hashes), "objects" (an objects file's data, or None for a generated set)}. SweepError
@@ -293,16 +357,19 @@ def load_sweep(path: Path) -> tuple[dict, list[dict]]:
         import tomllib
     except ModuleNotFoundError:   # Python 3.10
         import tomli as tomllib
+    raw = read_bounded(path, MAX_SWEEP_BYTES, "a sweep file")
     try:
-        raw = Path(path).read_bytes()
-    except OSError as e:
-        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
-    try:
-        doc = tomllib.loads(raw.decode("utf-8"))
+        text = raw.decode("utf-8")
     except UnicodeDecodeError:
         raise SweepError(f"{path}: not UTF-8 text") from None
+    try:
+        doc = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
-        raise SweepError(f"{path}: malformed TOML: {str(e).splitlines()[0]}") from None
+        raise SweepError(f"{path}: malformed TOML: {_toml_error(str(e), text)}") from None
+    except RecursionError:
+        raise SweepError(f"{path}: nests tables or lists more than {MAX_NESTING} levels deep") from None
+    if _depth(doc) > MAX_NESTING:
+        raise SweepError(f"{path}: nests tables or lists more than {MAX_NESTING} levels deep")
     try:
         return _resolve(doc, Path(path).resolve().parent)
     except SweepError as e:
@@ -377,8 +444,8 @@ def world_outcomes(cell: dict, objects: dict | None) -> tuple[dict, dict]:
     objs, seed = objects_of(cell, objects), cell["seed"]
     if cell["world"] != "physics":
         from sim.sensor_model import SensorModel
-        return closed_form_outcomes(objs, sensor=SensorModel() if cell["world"] == "closed_form" else None,
-                                    seed=seed)
+        return closed_form_outcomes(objs, reachable_above_cm3=_REACH_CM3,
+                                    sensor=SensorModel() if cell["world"] == "closed_form" else None, seed=seed)
     from sim.objects import archimedes_cm3
     from train.physics import Physics
     physics = Physics(objs, seed=seed, workers=1)   # in this process: a cell is one core's work
@@ -393,6 +460,39 @@ def world_outcomes(cell: dict, objects: dict | None) -> tuple[dict, dict]:
     return outcomes, probes
 
 
+_REACH_CM3 = 200.0   # the closed forms' reach: the ball counts as reached after more than this (closed_form_outcomes)
+
+
+def config_record(cell: dict) -> dict:
+    """The configs a cell runs with, fully resolved, as JSON data: {"agent": its AgentConfig without the seed (the
+    rows' seed column), "world": {"name", "sensor": the SensorModel's noise (closed_form) or null, "reachable_above_cm3"
+    (the closed forms), "physics": the pybullet WorldConfig (physics)}}. The same for every cell of a condition, set
+    size and world: DIR/configs.json holds each once, keyed by config_hash."""
+    key = json.dumps([cell["condition"], cell["n_train"], cell["world"]], sort_keys=True)
+    if key not in _CONFIGS:
+        from dataclasses import asdict
+        agent = agent_config(cell["condition"], 0, cell["n_train"]).to_dict()
+        agent.pop("seed", None)
+        world: dict = {"name": cell["world"]}
+        if cell["world"] == "physics":
+            from sim.world import WorldConfig
+            world["physics"] = asdict(WorldConfig())
+        else:
+            from sim.sensor_model import SensorModel
+            world["sensor"] = asdict(SensorModel()) if cell["world"] == "closed_form" else None
+            world["reachable_above_cm3"] = _REACH_CM3
+        _CONFIGS[key] = json.loads(json.dumps({"agent": agent, "world": world}, default=str))
+    return _CONFIGS[key]
+
+
+_CONFIGS: dict = {}
+
+
+def config_hash(record: dict) -> str:
+    """The rows' config column: the first 16 hex digits of the SHA-256 of config_record's canonical JSON."""
+    return _digest(record)[:16]
+
+
 def world_key(cell: dict) -> str:
     """Cells with the same key see the same world (conditions differ): a physics world is simulated once per key."""
     return _digest([cell["world"], cell["source"], cell["seed"]])
@@ -403,7 +503,8 @@ def schema():
     import pyarrow as pa
     return pa.schema([
         ("cell", pa.string()), ("condition", pa.string()), ("model", pa.string()), ("ablate", pa.string()),
-        ("overrides", pa.string()), ("world", pa.string()), ("set_group", pa.string()), ("set", pa.string()),
+        ("overrides", pa.string()), ("config", pa.string()), ("world", pa.string()), ("set_group", pa.string()),
+        ("set", pa.string()),
         ("generator_seed", pa.int64()), ("seed", pa.int64()), ("n_train", pa.int32()), ("n_probe", pa.int32()),
         ("n_orders", pa.int32()), ("order", pa.int32()), ("episode", pa.int32()), ("object", pa.string()),
         ("predicted_cm3", pa.float64()), ("observed_cm3", pa.float64()), ("archimedes_cm3", pa.float64()),
@@ -502,6 +603,7 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         "cell": col(_digest(cell)[:16], pa.string()), "condition": col(cond["name"], pa.string()),
         "model": col(cond["model"], pa.string()), "ablate": col(",".join(cond["ablate"]), pa.string()),
         "overrides": col(json.dumps(cond["overrides"], sort_keys=True), pa.string()),
+        "config": col(config_hash(config_record(cell)), pa.string()),
         "world": col(cell["world"], pa.string()), "set_group": col(cell["set_group"], pa.string()),
         "set": col(cell["set"], pa.string()),
         "generator_seed": col(cell["source"].get("generate", {}).get("seed"), pa.int64()),
@@ -547,14 +649,67 @@ def _remote_functions():
         return world_outcomes(cell, objects)
 
     @ray.remote(num_cpus=1, max_retries=2)   # retried only if a worker dies (e.g. a node lost)
-    def cell_task(cell, objects, world):
+    def cell_task(cell, objects, world, commit):
         import torch
         torch.set_num_threads(1)
+        started, t0 = utc_now(), time.perf_counter()
+        table = run_cell(cell, objects, world)
+        info = {"host": socket.gethostname(), "wall_s": round(time.perf_counter() - t0, 3), "started": started,
+                "ended": utc_now()}
         # the Parquet file's bytes, encoded here on the worker: the driver, which shares the cores with the
         # workers on a small machine, only writes them (and Ray moves a few kB instead of the rows)
-        return encode_cell(run_cell(cell, objects, world))
+        return encode_cell(table, cell_metadata(cell, commit, info)), info
 
     return world_task, cell_task
+
+
+# -- provenance ---------------------------------------------------------------------------------------------------
+
+META_KEY = b"aesop_torch.sweep"   # the key of a cell file's provenance in its Parquet metadata
+LIBRARIES = ("torch", "numpy", "pybullet", "pyarrow", "ray")
+
+
+def utc_now() -> str:
+    """The time now, UTC, ISO 8601 to the second (2026-12-06T14:03:59Z)."""
+    return time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+
+
+def commit() -> str:
+    """`git describe --always --dirty --tags` of this checkout; 'unknown' outside git (or without git)."""
+    import subprocess
+    try:
+        r = subprocess.run(["git", "describe", "--always", "--dirty", "--tags"], cwd=ROOT, capture_output=True,
+                           text=True, timeout=10, stdin=subprocess.DEVNULL)
+    except (OSError, subprocess.SubprocessError):
+        return "unknown"
+    return r.stdout.strip() if r.returncode == 0 and r.stdout.strip() else "unknown"
+
+
+def versions() -> dict:
+    """The installed versions of the libraries a cell's rows depend on, and Python's (None: not installed)."""
+    from importlib import metadata
+    found = {"python": sys.version.split()[0]}
+    for name in LIBRARIES:
+        try:
+            found[name] = metadata.version(name)
+        except metadata.PackageNotFoundError:
+            found[name] = None
+    return found
+
+
+def cell_metadata(cell: dict, commit: str, info: dict) -> dict:
+    """A cell file's provenance (docs/sweeps.md): its id and format, the driver's commit, the worker's libraries,
+    host and times, its config's hash and the config itself."""
+    record = config_record(cell)
+    return {"cell": cell_id(cell), "format": cell["format"], "commit": commit, "versions": versions(), **info,
+            "config": config_hash(record), "config_record": record}
+
+
+def cell_info(path) -> dict:
+    """The provenance a cell file holds (cell_metadata's dict); {} for a file written without it."""
+    import pyarrow.parquet as pq
+    meta = pq.read_metadata(path).metadata or {}
+    return json.loads(meta[META_KEY]) if META_KEY in meta else {}
 
 
 # -- writing ------------------------------------------------------------------------------------------------------
@@ -577,12 +732,15 @@ def write_atomic(path: Path, data: bytes) -> None:
         raise
 
 
-def encode_cell(table) -> bytes:
-    """A cell's rows as the bytes of its Parquet file (zstd)."""
+def encode_cell(table, metadata: dict | None = None) -> bytes:
+    """A cell's rows as the bytes of its Parquet file (zstd, a CRC per page, so --resume notices a damaged one),
+    with `metadata` (cell_metadata) as JSON under META_KEY."""
     import pyarrow as pa
     import pyarrow.parquet as pq
+    if metadata is not None:
+        table = table.replace_schema_metadata({META_KEY: json.dumps(metadata, sort_keys=True)})
     buf = pa.BufferOutputStream()
-    pq.write_table(table, buf, compression="zstd")
+    pq.write_table(table, buf, compression="zstd", write_page_checksum=True)
     return buf.getvalue().to_pybytes()
 
 
@@ -591,14 +749,86 @@ def write_cell(out: Path, cid: str, table) -> None:
     write_atomic(out / "cells" / f"{cid}.parquet", table if isinstance(table, bytes) else encode_cell(table))
 
 
-def read_cells(out: Path):
-    """Every finished cell's rows under DIR/cells, as one pyarrow Table (cells in file-name order)."""
-    import pyarrow as pa
+def read_cell(path):
+    """One cell file's rows (pyarrow Table of `schema()`, without the file's metadata), its pages' CRCs checked."""
     import pyarrow.parquet as pq
+    return pq.read_table(path, page_checksum_verification=True).replace_schema_metadata(None)
+
+
+def read_cells(out: Path, ids=None):
+    """Every finished cell's rows under DIR/cells (only the cells named in `ids`, if given), as one pyarrow Table
+    (cells in file-name order)."""
+    import pyarrow as pa
     files = sorted((Path(out) / "cells").glob("*.parquet"))
+    if ids is not None:
+        ids = set(ids)
+        files = [f for f in files if f.stem in ids]
     if not files:
         return schema().empty_table()
-    return pa.concat_tables([pq.read_table(f) for f in files])
+    return pa.concat_tables([read_cell(f) for f in files])
+
+
+def check_cell_file(path: Path, cell: dict | None = None) -> str | None:
+    """Why the file at `path` is not the finished rows of the cell its name says (None: it is). cell: that cell's
+    spec, to check the rows against (its condition, set group, set, seed, orders and episodes); without it, only that
+    the file reads and its rows are the cell of its name."""
+    import numpy as np
+    try:
+        st = path.stat()
+        if not stat.S_ISREG(st.st_mode):
+            return "not a regular file"
+        if st.st_size == 0:
+            return "empty (0 bytes)"
+        table = read_cell(path)
+    except Exception as e:   # noqa: BLE001  pyarrow's reasons are many (ArrowInvalid, OSError, ...)
+        import re
+        why = (str(e).strip().splitlines() or [type(e).__name__])[0]
+        why = re.sub(r"^Could not open Parquet input source '.*?': ", "", why)   # the path is said already
+        return f"not a readable Parquet file ({why[:120]})"
+    if table.schema != schema():
+        return f"its columns are not those of format {FORMAT} (another version of train/sweep.py wrote it?)"
+    ids = table.column("cell").unique().to_pylist()
+    if ids != [path.stem]:
+        return (f"holds the rows of cell {ids[0]}, not {path.stem} (renamed?)" if len(ids) == 1 else
+                f"holds the rows of {len(ids)} cells" if ids else "holds no rows")
+    if cell is None:
+        return None
+    n, B = cell["n_train"], _n_orders(cell["orders"], cell["n_train"])
+    for column, want in (("condition", cell["condition"]["name"]), ("set_group", cell["set_group"]),
+                         ("set", cell["set"]), ("seed", cell["seed"]), ("world", cell["world"])):
+        got = table.column(column).unique().to_pylist()
+        if got != [want]:
+            return f"its rows' {column} is {', '.join(map(str, got[:3]))}, not this cell's {want}"
+    if table.num_rows != B * n:
+        return f"{table.num_rows} rows, not this cell's {B} order(s) x {n} episodes"
+    if not (np.array_equal(table.column("order").to_numpy(), np.repeat(np.arange(B), n)) and
+            np.array_equal(table.column("episode").to_numpy(), np.tile(np.arange(1, n + 1), B))):
+        return "its rows are not this cell's orders and episodes, order by order"
+    return None
+
+
+def survey(out: Path, cells: list[dict]) -> tuple[set, list[str], list[tuple[Path, str]]]:
+    """What DIR/cells holds: (the ids of the cells finished, checked by check_cell_file; the names of foreign files,
+    no cell of this sweep; (path, why) of the files of this sweep's cells that are not their finished rows). Skipped:
+    a write's temporary files (.<cell>.parquet.*.tmp) and files set aside (*.rejected)."""
+    by_id = {c["id"]: c["spec"] for c in cells}
+    done, foreign, bad = set(), [], []
+    folder = out / "cells"
+    if not folder.is_dir():
+        return done, foreign, bad
+    for path in sorted(folder.iterdir()):
+        name = path.name
+        if name.startswith(".") or name.endswith(".rejected"):
+            continue
+        if path.suffix != ".parquet" or path.stem not in by_id:
+            foreign.append(name)
+            continue
+        why = check_cell_file(path, by_id[path.stem])
+        if why is None:
+            done.add(path.stem)
+        else:
+            bad.append((path, why))
+    return done, foreign, bad
 
 
 def _first_difference(a, b, where: str = "") -> str:
@@ -647,28 +877,61 @@ def parse_args(argv):
     return a
 
 
-def check_out(out: Path, spec: dict, resume: bool) -> None:
-    """Refuse a DIR this sweep may not write (nothing is created here)."""
+WRITTEN = ("sweep.json", "configs.json", "cells")   # what a sweep writes in DIR
+
+
+def _link_inside(out: Path) -> Path | None:
+    """The first symbolic link among what the sweep writes in DIR (a link would send its writes elsewhere)."""
+    for name in WRITTEN:
+        top = out / name
+        if top.is_symlink():
+            return top
+    if (out / "cells").is_dir():
+        for entry in sorted(os.scandir(out / "cells"), key=lambda e: e.name):
+            if entry.is_symlink():
+                return Path(entry.path)
+    return None
+
+
+def check_out(out: Path, spec: dict, resume: bool) -> dict | None:
+    """Refuse a DIR this sweep may not write (nothing is created here). --resume: the record DIR/sweep.json holds."""
+    if out.is_symlink() and not out.exists():
+        raise SweepError(f"--out {out} is a symbolic link to nothing ({os.readlink(out)})")
     if out.exists() and not out.is_dir():
         raise SweepError(f"--out {out} exists and is not a directory")
     recorded = out / "sweep.json"
+    record = None
     if resume:
-        if not recorded.is_file():
+        if link := _link_inside(out):
+            raise SweepError(f"--resume: {link} is a symbolic link; the sweep writes only inside --out {out}: "
+                             f"remove it")
+        if not recorded.exists():
             raise SweepError(f"--resume: {out} holds no sweep ({recorded} not found)")
         try:
-            old = json.loads(recorded.read_text())["spec"]
-        except (OSError, ValueError, KeyError, TypeError) as e:
-            raise SweepError(f"--resume: cannot read {recorded}: {e}") from None
+            record = json.loads(read_bounded(recorded, MAX_RECORD_BYTES, "a sweep record"))
+            old = record["spec"]
+        except SweepError as e:
+            raise SweepError(f"--resume: {e}") from None
+        except (ValueError, KeyError, TypeError, RecursionError) as e:
+            why = "nested too deeply" if isinstance(e, RecursionError) else f"{type(e).__name__}: {e}"
+            raise SweepError(f"--resume: cannot read {recorded}: {why}") from None
         if old != json.loads(json.dumps(spec)):
             raise SweepError(f"--resume: {out} holds another sweep ({_first_difference(old, spec)} differs); give "
                              f"another --out")
+        if (out / "cells").exists() and not (out / "cells").is_dir():
+            raise SweepError(f"--resume: {out / 'cells'} is not a directory")
     elif out.is_dir() and any(out.iterdir()):
         raise SweepError(f"--out {out} already holds files; --resume to continue its sweep, or another --out")
     p = out
     while not p.exists():
+        if p.is_symlink():
+            raise SweepError(f"--out {out}: {p} is a symbolic link to nothing")
         p = p.parent
     if not os.access(p, os.W_OK | os.X_OK):
         raise SweepError(f"--out {out}: {p} is not writable")
+    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
+        raise SweepError(f"--out {out} is not writable")
+    return record
 
 
 def _describe(c: dict) -> str:
@@ -713,9 +976,17 @@ class _Progress:
             self.bar = None
 
 
+class JoinError(Exception):
+    """A Ray cluster that cannot be joined (--address): one line, exit code 2."""
+
+
+AUTH_HINT = ("a cluster started with token authentication (ray start's default in recent Ray) needs "
+             "RAY_AUTH_MODE=token and its token (RAY_AUTH_TOKEN or ~/.ray/auth_token) in this sweep's environment")
+
+
 def start_ray(address: str | None, workers: int | None) -> bool:
     """Join `address` or start a quiet local instance; True when this process started (and so ends) it. Reuses a
-    Ray already initialised in this process (then False)."""
+    Ray already initialised in this process (then False). JoinError (one line) if the cluster cannot be joined."""
     import logging
 
     import ray
@@ -723,8 +994,20 @@ def start_ray(address: str | None, workers: int | None) -> bool:
         return False
     job = ray.job_config.JobConfig(code_search_path=[str(ROOT)])   # the workers import train.sweep from here
     if address is not None:
-        _reachable(address)
-        ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR, job_config=job)
+        try:
+            _reachable(address)
+        except ConnectionError as e:
+            raise JoinError(f"cannot join Ray at {address}: {e}; check the address (`ray start --head` prints it, "
+                            f"`ray status` on its node)") from None
+        with _stderr_kept() as said:   # Ray's gRPC retries print a screenful on a refused join: kept, judged here
+            try:
+                ray.init(address=address, log_to_driver=False, logging_level=logging.ERROR, job_config=job)
+            except Exception as e:   # noqa: BLE001  Ray's reasons are many (ConnectionError, AuthenticationError, ...)
+                raise JoinError(_join_failure(address, e, said())) from None
+            text = said()
+        if text:   # joined: what Ray said on the way (its warnings) is passed on as it was
+            sys.stderr.write(text)
+            sys.stderr.flush()
         return True
     from train.physics import cores
     # "local": a new instance of this process's own, even where a cluster runs (ray.init() would join that)
@@ -733,23 +1016,52 @@ def start_ray(address: str | None, workers: int | None) -> bool:
     return True
 
 
+def _join_failure(address: str, e: Exception, said: str) -> str:
+    """The one line for a failed ray.init(address=...): an authentication failure named as such, with its fix."""
+    import ray
+    text = f"{type(e).__name__} {e} {said}".lower()
+    first = (str(e).strip().splitlines() or [type(e).__name__])[0][:160]
+    if isinstance(e, getattr(ray.exceptions, "AuthenticationError", ())) or any(
+            w in text for w in ("unauthenticated", "authentication", "auth_token", "auth token")):
+        return (f"cannot join Ray at {address}: the cluster requires token authentication: set RAY_AUTH_MODE=token "
+                f"(and its token: RAY_AUTH_TOKEN or ~/.ray/auth_token) and run the sweep again")
+    return f"cannot join Ray at {address}: {first}; {AUTH_HINT}"
+
+
+@contextlib.contextmanager
+def _stderr_kept():
+    """File descriptor 2 (where Ray's C++ core writes) into a temporary file while the block runs, then back; yields
+    a function that returns what was written. Python's sys.stderr writes through fd 2 too."""
+    sys.stderr.flush()
+    saved = os.dup(2)
+    with tempfile.TemporaryFile() as tmp:
+        os.dup2(tmp.fileno(), 2)
+        try:
+            yield lambda: (sys.stderr.flush(), tmp.seek(0), tmp.read(1 << 20).decode("utf-8", "replace"))[-1]
+        finally:
+            sys.stderr.flush()
+            os.dup2(saved, 2)
+            os.close(saved)
+
+
 def _reachable(address: str, timeout: float = 10.0) -> None:
     """ConnectionError (one line) if HOST:PORT does not answer: ray.init would retry it for ever, printing warnings.
     Other forms (auto, ray://...) are left to Ray."""
-    import socket
     host, sep, port = address.rpartition(":")
     if not sep or not port.isdigit() or "://" in address:
         return
     try:
         socket.create_connection((host.strip("[]"), int(port)), timeout=timeout).close()
     except OSError as e:
-        raise ConnectionError(f"{address} does not answer ({e.strerror or e})") from None
+        raise ConnectionError(f"it does not answer ({e.strerror or e})") from None
 
 
-def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -> list[tuple[dict, str]]:
+def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None, commit: str = "unknown",
+              finished: dict | None = None) -> list[tuple[dict, str]]:
     """Run the cells on Ray (initialised), writing each as it finishes; the failures as (cell, one-line reason).
     A few cells per CPU are handed to Ray at a time (the rest wait here: a Ctrl-C leaves little running, and a
-    million-cell sweep does not sit in Ray's queues). on_cell(cell): called after each cell is written (tests)."""
+    million-cell sweep does not sit in Ray's queues). on_cell(cell): called after each cell is written (tests).
+    commit: recorded in each cell file; finished: filled with {cell id: {host, wall_s, started, ended}}."""
     import ray
     world_task, cell_task = _remote_functions()
     window = max(8, 4 * int(ray.cluster_resources().get("CPU", 1)))
@@ -762,14 +1074,14 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
             if k not in worlds:
                 worlds[k] = world_task.remote(c["spec"], c["objects"])
             world = worlds[k]
-        return cell_task.remote(c["spec"], c["objects"], world)
+        return cell_task.remote(c["spec"], c["objects"], world, commit)
 
     queue = list(reversed(cells))   # popped from the end: in the given order
     pending: dict = {}
     failed = []
-    # Nothing is cancelled on the way out (Ctrl-C, an error): the driver's end (ray.shutdown, or its exit) ends its
-    # tasks, locally and on a cluster; ray.cancel then the reply of a cell already done aborted Ray's core worker
-    # ("Tried to complete task that was not pending"), exit 1 and a C++ stack trace instead of the one line.
+    # Nothing is cancelled on the way out (Ctrl-C, a signal, an error): the driver's end (ray.shutdown, or its exit)
+    # ends its tasks, locally and on a cluster; ray.cancel then the reply of a cell already done aborted Ray's core
+    # worker ("Tried to complete task that was not pending"), exit 1 and a C++ stack trace instead of the one line.
     while queue or pending:
         while queue and len(pending) < window:
             c = queue.pop()
@@ -779,7 +1091,7 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
         for ref in done:
             c = pending.pop(ref)
             try:
-                data = ray.get(ref)
+                data, info = ray.get(ref)
             except ray.exceptions.RayError as e:
                 cause = getattr(e, "cause", None) or e
                 why = (str(cause).strip().splitlines() or [type(cause).__name__])[-1]
@@ -787,34 +1099,141 @@ def run_sweep(cells: list[dict], out: Path, progress: _Progress, on_cell=None) -
                 progress.write(f"{PROG}: cell {c['id']} ({_describe(c)}) failed: {why}")
                 continue
             write_cell(out, c["id"], data)
+            if finished is not None:
+                finished[c["id"]] = info
             progress.update()
             if on_cell is not None:
                 on_cell(c)
     return failed
 
 
-def _sigint_ignored():
-    """The runner's guard: a second Ctrl-C must not interrupt the clean-up after the first."""
-    from train.run import _sigint_ignored as guard
-    return guard()
+# -- how a sweep ends ---------------------------------------------------------------------------------------------
+
+class Ended(KeyboardInterrupt):
+    """SIGTERM or SIGHUP (a `kill`, `timeout`, a closed terminal): the sweep ends as on Ctrl-C, a KeyboardInterrupt
+    to every handler of one, with exit code 128 + the signal's number."""
+
+    def __init__(self, signum: int):
+        super().__init__(signum)
+        self.signum = signum
+
+
+ENDING = (signal.SIGTERM, signal.SIGHUP)   # the signals that end a sweep as Ctrl-C does
+_DRIVER = {"pid": None, "signal": None}   # the process whose handlers raise Ended (a forked child resets them: see
+                                         # _ended), and the last signal they saw
+
+
+def _ended(signum, frame):
+    if os.getpid() != _DRIVER["pid"]:   # a child forked with the handler: the default, silently
+        signal.signal(signum, signal.SIG_DFL)
+        os.kill(os.getpid(), signum)
+        return
+    # kept: raised inside ray.wait, the exception reaches Python as Ray's own KeyboardInterrupt, without its signal
+    _DRIVER["signal"] = signum
+    raise Ended(signum)
+
+
+@contextlib.contextmanager
+def _ending_signals():
+    """SIGTERM and SIGHUP raise Ended while main() runs (only the main thread may set handlers; one ignored, as
+    under nohup, stays ignored); the previous handlers afterwards. Yields a function that sets them again: ray.init
+    puts its own SIGTERM handler (sys.exit(15)) in place."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = {sig: signal.getsignal(sig) for sig in ENDING} if main else {}
+    _DRIVER["signal"] = None
+
+    def install():
+        for sig, handler in previous.items():
+            if handler is not signal.SIG_IGN:
+                _DRIVER["pid"] = os.getpid()
+                signal.signal(sig, _ended)
+    try:
+        install()
+        yield install
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
+@contextlib.contextmanager
+def _quiet():
+    """A second Ctrl-C (or SIGTERM, SIGHUP) must not interrupt the clean-up after the first (only the main thread may
+    set handlers)."""
+    main = threading.current_thread() is threading.main_thread()
+    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *ENDING)} if main else {}
+    try:
+        yield
+    finally:
+        for sig, handler in previous.items():
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+
+
+def _how(e: KeyboardInterrupt) -> tuple[str, int]:
+    """(" by SIGTERM" or "", exit code) of an interruption: Ctrl-C 130, a signal 128 + its number."""
+    signum = getattr(e, "signum", None) or _DRIVER["signal"] or signal.SIGINT
+    return ("" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"), 128 + signum
+
+
+# -- main ---------------------------------------------------------------------------------------------------------
+
+def _start(a) -> bool:
+    """start_ray, a SIGTERM during ray.init (Ray's handler: sys.exit(15)) turned into Ended."""
+    try:
+        return start_ray(a.address, a.workers)
+    except SystemExit as e:
+        if e.code == signal.SIGTERM:
+            raise Ended(signal.SIGTERM) from None
+        raise
+
+
+def _write_record(out: Path, record: dict) -> None:
+    write_atomic(out / "sweep.json", (json.dumps(record, indent=1) + "\n").encode())
+
+
+def _write_configs(out: Path, cells: list[dict]) -> None:
+    """DIR/configs.json: {config hash: config_record} of every cell of the sweep, with those recorded before (a
+    resumed sweep whose code resolves a config otherwise keeps both)."""
+    configs = {}
+    path = out / "configs.json"
+    if path.exists():
+        try:
+            old = json.loads(read_bounded(path, MAX_RECORD_BYTES, "a configs record"))
+            configs = old if isinstance(old, dict) else {}
+        except (SweepError, ValueError, RecursionError):
+            pass   # damaged: written anew from the cells
+    for c in cells:
+        record = config_record(c["spec"])
+        configs.setdefault(config_hash(record), record)
+    write_atomic(path, (json.dumps(configs, indent=1, sort_keys=True) + "\n").encode())
 
 
 def main(argv=None, on_cell=None) -> int:
+    with _ending_signals() as reinstall:
+        return _main(argv, on_cell, reinstall)
+
+
+def _main(argv, on_cell, reinstall) -> int:
     owns_ray = False   # this process started (or joined) Ray, and so ends it
     progress = None
     out = None
     n_cells = 0
+    record, run = None, None   # DIR/sweep.json as written, and this run's entry in it
     try:
         try:
             a = parse_args(sys.argv[1:] if argv is None else argv)
             spec, cells = load_sweep(a.sweep)
-            check_out(a.out, spec, a.resume)
+            record = check_out(a.out, spec, a.resume)
         except SweepError as e:
             print(f"{PROG}: error: {e}", file=sys.stderr)
             return 2
-        cells_dir = a.out / "cells"
-        on_disk = {p.stem for p in cells_dir.glob("*.parquet")} if cells_dir.is_dir() else set()
-        todo = [c for c in cells if c["id"] not in on_disk]
+        done, foreign, bad = survey(a.out, cells) if a.resume else (set(), [], [])
+        for name in foreign:
+            print(f"{PROG}: {a.out / 'cells' / name} is no cell of this sweep: not counted (move it out of "
+                  f"{a.out / 'cells'})", file=sys.stderr)
+        for path, why in bad:
+            print(f"{PROG}: {path}: {why}: its cell runs again (the file is kept as {path.name}.rejected)",
+                  file=sys.stderr)
+        todo = [c for c in cells if c["id"] not in done]
         where = f"Ray at {a.address}" if a.address else "a local Ray instance"
         print(f"{PROG}: {len(cells)} cell(s) ({len(spec['conditions'])} condition(s), world {spec['world']}), "
               f"{len(cells) - len(todo)} on disk, {len(todo)} to run on {where} -> {a.out}", flush=True)
@@ -824,27 +1243,45 @@ def main(argv=None, on_cell=None) -> int:
             import ray
             owns_ray = not ray.is_initialized()   # from here on a Ctrl-C during ray.init ends what it started
             try:
-                start_ray(a.address, a.workers)
-            except Exception as e:   # noqa: BLE001  Ray's reasons are many (ConnectionError, RuntimeError, ...)
-                print(f"{PROG}: error: cannot {'join Ray at ' + a.address if a.address else 'start Ray'}: "
-                      f"{(str(e).strip().splitlines() or [type(e).__name__])[0]}", file=sys.stderr)
+                _start(a)
+            except JoinError as e:
+                print(f"{PROG}: error: {e}", file=sys.stderr)
+                return 2
+            except Exception as e:   # noqa: BLE001  Ray's reasons are many (RuntimeError, OSError, ...)
+                print(f"{PROG}: error: cannot start Ray: {(str(e).strip().splitlines() or [type(e).__name__])[0]}",
+                      file=sys.stderr)
                 return 1
+            finally:
+                reinstall()   # ray.init set its own SIGTERM handler
         try:
-            cells_dir.mkdir(parents=True, exist_ok=True)
-            if not a.resume:
-                write_atomic(a.out / "sweep.json", (json.dumps({"format": FORMAT, "sweep_file": str(a.sweep),
-                                                                "spec": spec}, indent=1) + "\n").encode())
+            (a.out / "cells").mkdir(parents=True, exist_ok=True)
+            for path, _ in bad:
+                os.replace(path, path.with_name(path.name + ".rejected"))
+            prov = {"commit": commit(), "versions": versions()}
+            run = {"started": utc_now(), "ended": None, "ended_by": None, "resumed": a.resume,
+                   "host": socket.gethostname(), "ray": a.address or "local", **prov, "cells_run": 0,
+                   "cells_failed": 0, "cells": {}}
+            if record is None:
+                record = {"format": FORMAT, "sweep_file": str(a.sweep), "spec": spec,
+                          "cells": [c["id"] for c in cells], "runs": []}
+            record.setdefault("runs", []).append(run)
+            record["cells"] = [c["id"] for c in cells]
+            _write_configs(a.out, cells)
+            _write_record(a.out, record)
             out, n_cells = a.out, len(cells)
             if todo:
                 progress = _Progress(len(cells), len(cells) - len(todo))
                 try:
-                    failed = run_sweep(todo, out, progress, on_cell)
+                    failed = run_sweep(todo, out, progress, on_cell, commit=prov["commit"], finished=run["cells"])
                 finally:
                     progress.close()
         except OSError as e:   # a full disk, DIR removed under the sweep: the cells written so far stay
-            print(f"{_fresh_line()}{PROG}: error: cannot write {e.filename or a.out}: {e.strerror or e}",
-                  file=sys.stderr)
+            with _quiet():
+                _finish(out, record, run, "error")
+                print(f"{_fresh_line()}{PROG}: error: cannot write {e.filename or a.out}: {e.strerror or e}",
+                      file=sys.stderr)
             return 1
+        _finish(out, record, run, "failed" if failed else "finished", len(failed))
         if failed:
             print(f"{PROG}: {len(failed)} of {len(cells)} cell(s) failed (the first: {_describe(failed[0][0])}: "
                   f"{failed[0][1]}); --resume runs them again", file=sys.stderr)
@@ -852,23 +1289,37 @@ def main(argv=None, on_cell=None) -> int:
         print(f"done: {len(cells)} cell(s) in {out / 'cells'} ({time.perf_counter() - t0:.0f} s); summary: "
               f"python -m train.report {out}", flush=True)
         return 0
-    except KeyboardInterrupt:
-        with _sigint_ignored():
+    except KeyboardInterrupt as e:
+        by, code = _how(e)
+        with _quiet():
             if progress is not None:
                 progress.close()
             if out is None:
-                print(f"{_fresh_line()}{PROG}: interrupted before the sweep started", file=sys.stderr)
+                print(f"{_fresh_line()}{PROG}: interrupted{by} before the sweep started", file=sys.stderr)
             else:
+                _finish(out, record, run, f"interrupted{by}")
                 done = len(list((out / "cells").glob("*.parquet")))
-                print(f"{_fresh_line()}{PROG}: interrupted: {done} of {n_cells} cell(s) on disk in {out / 'cells'} "
-                      f"(--resume runs the rest)", file=sys.stderr)
+                print(f"{_fresh_line()}{PROG}: interrupted{by}: {done} of {n_cells} cell(s) on disk in "
+                      f"{out / 'cells'} (--resume runs the rest)", file=sys.stderr)
             _stop_ray(owns_ray)
             owns_ray = False
-        return 130
+        return code
     finally:
         if owns_ray:
-            with _sigint_ignored():
+            with _quiet():
                 _stop_ray(True)
+
+
+def _finish(out: Path | None, record: dict | None, run: dict | None, how: str, failed: int = 0) -> None:
+    """This run's entry in DIR/sweep.json completed (its end, how it ended, the cells it ran); a write that fails
+    here leaves the entry as written at the start (the sweep's own line says what happened)."""
+    if out is None or record is None or run is None or run["ended"] is not None:
+        return
+    run.update(ended=utc_now(), ended_by=how, cells_run=len(run["cells"]), cells_failed=failed)
+    try:
+        _write_record(out, record)
+    except OSError:
+        pass
 
 
 def _fresh_line() -> str:
