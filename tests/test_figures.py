@@ -135,3 +135,23 @@ def test_many_runs_without_a_population_state_their_own_disagreement():
     assert len(runs) > MAX_CURVES
     title = figure2(runs).axes[1].get_title()
     assert "orders: 13" in title and f"{4 / 13:.1%} of orders (4 of 13)" in title and "UUUU" in title
+
+
+def test_a_model_with_contexts_draws_its_certainty_per_context():
+    """Records with certainty_by_context (the contextual model's floating, sinking, fate) get a panel per context,
+    a line per property of the split five, at the certainty the records hold (median over the orders)."""
+    split = ("color", "fill", "elongation", "size", "weight")
+
+    def rec(t):
+        by = {c: {p: (1.0 if (c, p) == ("fate", "weight") and t > 0 else 0.0) for p in split}
+              for c in ("floating", "sinking", "fate")}
+        return {"knowledge": {p: {"state": "unknown", "certainty": 0.0} for p in split}, "probe_rel_error": 0.5,
+                "certainty_by_context": by}
+
+    fig = figure2([[rec(0), rec(1)], [rec(0), rec(1)]])
+    assert len(fig.axes) == 5
+    fate = fig.axes[4]
+    assert fate.get_ylabel() == "fate" and len(fate.lines) == len(split)
+    weight = [ln for ln in fate.lines if ln.get_label() == "weight"][0]
+    assert list(weight.get_ydata()) == [0.0, 1.0]
+    assert all(list(ln.get_ydata()) == [0.0, 0.0] for ln in fig.axes[2].lines)     # floating: nothing known

@@ -177,6 +177,7 @@ class Experiment:
                 "archimedes_cm3": round(out["archimedes_cm3"], 2),
                 "rules": {p: RULE_NAMES[int(fired[b, i])] for i, p in enumerate(self.agent.config.encoder.properties)},
                 "knowledge": self.agent.knowledge(b),
+                **self._by_context(b),
                 "encoded": bool(res.encoded[b]),
                 "goal_reached": out["goal_after"],
                 "probe_rel_error": None if probe_err[b] is None else round(probe_err[b], 4),
@@ -218,6 +219,17 @@ class Experiment:
         pred = self.probe_predictions()
         truth = torch.tensor([self.probes[n]["archimedes_cm3"] for n in self.probe_names])
         return [median_rel_error(pred[b], truth) for b in range(len(self.orders))]
+
+    def _by_context(self, b: int) -> dict:
+        """{"certainty_by_context": {context: {property: certainty}}} for rules that keep knowledge per context of
+        their own (the contextual model's floating, sinking and fate), else nothing."""
+        rules = self.agent.rules
+        if not hasattr(rules, "context_certainty"):
+            return {}
+        cert = rules.context_certainty[b]
+        props = self.agent.config.encoder.properties
+        return {"certainty_by_context": {c: {p: round(float(cert[k, i]), 4) for i, p in enumerate(props)}
+                                         for k, c in enumerate(rules.contexts)}}
 
     def final_knowledge(self) -> list[dict]:
         return [self.agent.knowledge(b) for b in range(len(self.orders))]

@@ -17,6 +17,8 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
+import warnings  # noqa: E402
+
 import numpy as np  # noqa: E402
 from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.colors import to_rgba  # noqa: E402
@@ -122,6 +124,29 @@ def _letters(ax, x: np.ndarray, y: np.ndarray, state: np.ndarray, colour: str, a
                        linewidths=0, zorder=3, gid=STATE_LETTERS[s])
 
 
+def _context_panels(fig, axes, runs: list[list[dict]], contexts: list, xs) -> None:
+    """Certainty per property within each context (records' certainty_by_context): the median over orders."""
+    props = _properties(runs)
+    for ax, c in zip(axes, contexts):
+        for p in props:
+            v = np.full((len(runs), len(xs)), np.nan)
+            for b, run in enumerate(runs):
+                for t, rec in enumerate(run):
+                    v[b, t] = rec.get("certainty_by_context", {}).get(c, {}).get(p, np.nan)
+            with warnings.catch_warnings():   # an episode past a shorter order's end: NaN, not a warning
+                warnings.simplefilter("ignore", RuntimeWarning)
+                med = np.nanmedian(v, axis=0)
+            ax.plot(xs, med, linewidth=1.3,
+                    color=PROPERTY_COLOURS[OBJECT_PROPERTIES.index(p)], label=p)
+        ax.set_ylim(-0.06, 1.08)
+        ax.set_ylabel(c, fontsize=8)
+        ax.tick_params(labelsize=7)
+        ax.grid(alpha=0.25, linewidth=0.5)
+    axes[0].set_title("certainty per context (median over orders)", fontsize=9)
+    axes[-1].set_xlabel("episode")
+    axes[0].legend(fontsize=6, ncol=len(props), loc="lower center", bbox_to_anchor=(0.5, 1.12), frameon=False)
+
+
 def figure2(runs: list[list[dict]], floor: float | None = None, population: dict | None = None):
     """runs: per order, the episode records of summary.json; floor: the senses' error (a fraction, drawn dashed
     on the right; None draws none); population: a population run's {"orders", "agree_fraction",
@@ -133,7 +158,14 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
     n_orders, _, n_eps = cert.shape
     xs = np.arange(1, n_eps + 1)
     banded = n_orders > MAX_CURVES
-    fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [3, 2]})
+    contexts = next((list(r[0]["certainty_by_context"]) for r in runs if r and "certainty_by_context" in r[0]), [])
+    if contexts:   # a model with knowledge per context: a third column, its certainty per context
+        fig = plt.figure(figsize=(18, 5.6))
+        grid = fig.add_gridspec(len(contexts), 3, width_ratios=[3, 2, 2])
+        left, right = fig.add_subplot(grid[:, 0]), fig.add_subplot(grid[:, 1])
+        _context_panels(fig, [fig.add_subplot(grid[k, 2]) for k in range(len(contexts))], runs, contexts, xs)
+    else:
+        fig, (left, right) = plt.subplots(1, 2, figsize=(13, 5.2), gridspec_kw={"width_ratios": [3, 2]})
     # a small sideways step per property, so equal certainties (all 0 at first, 1 once decided) stay apart
     props = _properties(runs)
     colours = [PROPERTY_COLOURS[OBJECT_PROPERTIES.index(p)] for p in props]
