@@ -348,10 +348,11 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
 
 def test_the_constants_kept_without_torch_are_the_agents():
     from aesop_torch.agent import ABLATIONS, MODELS
-    from aesop_torch.rules import PROPERTIES, RULE_NAMES
+    from aesop_torch.encoders import OBJECT_PROPERTIES
+    from aesop_torch.rules import RULE_NAMES
     from train.summary import KNOWLEDGE_LETTERS
     assert sweep.MODELS == MODELS and sweep.ABLATIONS == ABLATIONS
-    assert sweep.PROPERTY_COLUMNS == PROPERTIES and sweep.RULE_LETTERS == "".join(RULE_NAMES)
+    assert sweep.PROPERTY_COLUMNS == OBJECT_PROPERTIES and sweep.RULE_LETTERS == "".join(RULE_NAMES)
     assert sweep.KNOWLEDGE_LETTERS == KNOWLEDGE_LETTERS
 
 
