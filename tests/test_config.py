@@ -162,7 +162,7 @@ def test_the_worlds_config_is_reached_under_world():
     assert WorldConfig().mass_noise_g == 1.0
     for text, message in (("world.level_noise_cm=-1", "world.level_noise_cm takes a number (float) >= 0"),
                           ("world.jar_xy=[0.3]", "world.jar_xy takes an array of 2 numbers, got [0.3]"),
-                          ("world.tank.staves=2", "world.tank.staves takes an integer (int) >= 3"),
+                          ("world.tank.staves=2", "world.tank.staves takes an integer (int) from 3 to 256"),
                           ("world.bogus=1", "unknown key world.bogus (world has: tank, robot"),
                           ("world.tank=1", "world.tank is a table of settings"),
                           ("rules.uncertain_decay=1", "is not a key of the world's config")):
