@@ -68,6 +68,7 @@ def _outcomes_problem(e: dict, jar) -> str | None:
 RECORD_KEYS = {"object", "predicted_cm3", "observed_cm3", "archimedes_cm3", "rules", "knowledge", "encoded",
                "goal_reached", "probe_rel_error", "perceived"}
 RECORD_OPTIONAL = {"true"}   # the file's values, for the logs
+TRUE_KEYS = {"extent_cm", "fill", "mass_g"}   # sim.objects.ObjectSpec.true_values
 # a prediction is a weighted average of recalled rewards (paper) or a fit over them (extended): beyond 100 jars of
 # water it is no reading of these objects
 PREDICTION_JARS = 100.0
@@ -94,7 +95,8 @@ def _records_problem(e: dict, jar_cm3: float = math.inf) -> str | None:
             if not RECORD_KEYS <= set(rec) <= RECORD_KEYS | RECORD_OPTIONAL:
                 missing, extra = sorted(RECORD_KEYS - set(rec)), sorted(map(str, set(rec) - RECORD_KEYS -
                                                                             RECORD_OPTIONAL))
-                return f"{where}'s record keys: missing {missing}, unexpected {[_cut(k) for k in extra]}"
+                return (f"{where}'s record keys: missing {', '.join(missing) or 'none'}, unexpected "
+                        f"{', '.join(map(_cut, extra)) or 'none'}")
             if p := _record_problem(rec, jar_cm3, PROPERTIES, RULE_NAMES, STATES):
                 return f"{where}: {p}"
     return None
@@ -131,10 +133,10 @@ def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -
     m = rec["perceived"]
     if not _measurement_shape_ok(m) or (p := _measurement_problem(m)):
         return f"perceived: {p if _measurement_shape_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
-    if "true" in rec and not (isinstance(rec["true"], dict) and len(rec["true"]) <= 8 and all(
-            isinstance(k, str) and (_number(x) or (isinstance(x, list) and len(x) <= 3 and all(map(_number, x))))
-            for k, x in rec["true"].items())):
-        return "true is not the file's values (numbers)"
+    if "true" in rec and not (isinstance(rec["true"], dict) and set(rec["true"]) <= TRUE_KEYS and all(
+            _number(x) or (isinstance(x, list) and len(x) == 3 and all(map(_number, x)))
+            for x in rec["true"].values())):
+        return f"true is not the file's values ({', '.join(sorted(TRUE_KEYS))}: numbers)"
     return None
 
 
