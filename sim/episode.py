@@ -184,13 +184,15 @@ def drop_into_jar(world, name: str, record=None, t0: float | None = None) -> Epi
 
 
 def in_jar(world, body: int) -> bool:
-    """Whether the body's centre of mass is inside the jar: within its inner wall and between its bottom and rim (an
-    object that floats sits in the water below the rim; one the arm never carried is on the stand or in the hand)."""
-    tank = world.tank
-    pos = p.getBasePositionAndOrientation(body, physicsClientId=world.client)[0]
+    """Whether the body is in the jar: its centre within the jar's inner wall, its lowest point between the jar's
+    bottom and its rim (a tall float may stick out above the rim; an object the arm never carried is on the stand or
+    in the hand, outside the wall)."""
+    tank, cl = world.tank, world.client
+    pos = p.getBasePositionAndOrientation(body, physicsClientId=cl)[0]
+    low = p.getAABB(body, physicsClientId=cl)[0][2]
     radius = tank.jar.inner_diameter_cm / 2 * CM
     off = math.hypot(pos[0] - tank.center[0], pos[1] - tank.center[1])
-    return off <= radius and tank.bottom_z <= pos[2] <= tank.rim_z
+    return off <= radius and tank.bottom_z - 0.01 <= low <= tank.rim_z   # 1 cm: the AABB's margin and the plate
 
 
 def _rests_on_bottom(world, body: int) -> bool:

@@ -55,6 +55,8 @@ def _outcome_measurement(key, value):
     (_outcome_measurement("fill", 1e-300), "fill 1e-300 outside [0.25, 1]"),
     (_outcome_measurement("mass_g", 1e300), "mass_g 1e+300 above 10000 g"),
     (_outcome_measurement("extent_cm", [1e-300, 5.0, 5.0]), "extent_cm"),
+    (lambda s: s["experiment"]["outcomes"]["red_light_cylinder"].update(true={"x": [[[[1.0]]]]}),
+     "outcome of 'red_light_cylinder': true is not the file's values"),
 ])
 def test_a_forged_record_is_refused_in_one_line(saved, tmp_path, edit, words):
     message = refused(forged(saved, tmp_path, edit), words)

@@ -56,7 +56,7 @@ def _outcomes_problem(e: dict, jar) -> str | None:
     jar_cm3 = jar.area_cm2 * jar.height_cm
     for kind, table in (("outcome", e["outcomes"]), ("probe", e["probes"])):
         for name, o in table.items():
-            if p := _measurement_problem(o["measurement"]):
+            if p := _measurement_problem(o["measurement"]) or ("true" in o and _true_problem(o["true"])):
                 return f"{kind} of {name!r}: {p}"
             volumes = [o["archimedes_cm3"]] + ([o["observed_cm3"]] if kind == "outcome" else [])
             if not 0.0 < o["archimedes_cm3"] <= jar_cm3 or any(abs(v) > jar_cm3 for v in volumes):
@@ -133,9 +133,14 @@ def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -
     m = rec["perceived"]
     if not _measurement_shape_ok(m) or (p := _measurement_problem(m)):
         return f"perceived: {p if _measurement_shape_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
-    if "true" in rec and not (isinstance(rec["true"], dict) and set(rec["true"]) <= TRUE_KEYS and all(
-            _number(x) or (isinstance(x, list) and len(x) == 3 and all(map(_number, x)))
-            for x in rec["true"].values())):
+    if "true" in rec and (p := _true_problem(rec["true"])):
+        return p
+    return None
+
+
+def _true_problem(true) -> str | None:
+    if not (isinstance(true, dict) and set(true) <= TRUE_KEYS and all(
+            _number(x) or (isinstance(x, list) and len(x) == 3 and all(map(_number, x))) for x in true.values())):
         return f"true is not the file's values ({', '.join(sorted(TRUE_KEYS))}: numbers)"
     return None
 
