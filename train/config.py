@@ -85,8 +85,15 @@ RANGES = {
     "encoder.mass_max_g": POSITIVE, "encoder.max_aspect": AT_LEAST_ONE,
     # sizes of tensors: neurons, rows, assemblies, episodes, chunks, samples, epochs
     "hub.n_neurons": AT_LEAST_ONE, "hub.assembly_size": AT_LEAST_ONE, "hub.rows": AT_LEAST_ONE,
-    "hub.max_assemblies": AT_LEAST_ONE, "memory.rows": AT_LEAST_ONE, "memory.cols": AT_LEAST_ONE,
-    "memory.chunk_agents": AT_LEAST_ONE, "memory.chunk_elements": AT_LEAST_ONE,
+    "hub.max_assemblies": AT_LEAST_ONE,
+    # the sheet's neurons (memory.rows x memory.cols: the paper's 20 x 50) are each driven by every other in a recall
+    # step, so its work grows as their square: 100 x 1000 is 10^4x the paper's (the hub is the sheet's object rows,
+    # hub.rows x hub.n_neurons = 12 x memory.cols, so this bounds it too); a recall step settles in ~5 clamped and ~2
+    # free steps (aesop_torch/memory.py), 1000 of either is a recall that does not settle; a chunk of 2^31 elements
+    # is 8 GB of float32 working tensors at once
+    "memory.rows": (1, True, 100), "memory.cols": (1, True, 1000), "memory.cue_steps": (0, True, 1000),
+    "memory.free_steps": (0, True, 1000), "memory.misses": (0, True, 1000),
+    "memory.chunk_agents": (1, True, 1 << 20), "memory.chunk_elements": (1, True, 1 << 31),
     # the maps' developmental samples are held at once (1e6 x the 22-d word map's inputs x 4 bytes: 88 MB) and each
     # epoch is a pass over them; 4000 x 30 (the defaults) take ~0.3 s, so the bounds' product is about an hour
     "som_samples": (1, True, 1_000_000), "som_epochs": (1, True, 10_000),
