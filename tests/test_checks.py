@@ -68,6 +68,10 @@ def test_the_default_config_passes_every_check():
     ({"encoder.mass_max_g": 2.0}, "encoder.mass_max_g", ["exclude object", "g)"]),
     # the depth range holds the stand's view, but not the objects seen from above
     ({"world.camera.far": 0.4}, "world.camera.far", ["outside world.camera.near"]),
+    # the jar through the stand, the stand off the table
+    ({"world.jar_xy": [0.2, -0.2]}, "world.jar_xy", ["overlap", "world.stand_xy [0.2, -0.25]"]),
+    ({"world.table_y": [-0.25, 0.3]}, "world.table_y", ["world.stand_xy [0.2, -0.25] puts a footprint of radius "
+                                                         "4.5 cm off the table"]),
     # the settle's windows outlast its timeout
     ({"world.tank.settle_windows": 1000}, "world.tank.settle_windows", ["nothing could be seen to settle"]),
 ])
@@ -131,7 +135,8 @@ def test_a_fuzz_of_in_range_settings_is_refused_in_one_line_or_passes():
         "world.camera.near": lambda: 10 ** rng.uniform(-3, 0.5),
         "world.camera.far": lambda: 10 ** rng.uniform(-1, 1),
         "world.stand_height": lambda: rng.uniform(0.01, 0.4),
-        "world.jar_xy": lambda: [rng.uniform(0.1, 0.5), rng.uniform(-0.3, 0.3)],
+        "world.jar_xy": lambda: [rng.uniform(0.1, 0.5), rng.uniform(-0.4, 0.3)],
+        "world.stand_xy": lambda: [rng.uniform(0.1, 0.5), rng.uniform(-0.4, 0.3)],
         "world.robot.max_velocity": lambda: 10 ** rng.uniform(-3, 1),
         "world.waypoints": lambda: rng.randint(1, 50),
         "world.tank.settle_windows": lambda: rng.randint(1, 50),

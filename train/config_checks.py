@@ -4,6 +4,7 @@ train.config checks each key alone (its type, its RANGES); sim.world.World and s
 cannot build (train.config.check_world). What is left is settings that build a world which then measures nothing,
 or the wrong thing, or runs for ever:
 
+- the jar or the stand off the table, or through each other;
 - the arm cannot reach the stand or the jar (sim.kinematics.ArmKinematics on the palm's targets of an episode);
 - the motors cannot get the object to the jar within the move timeout (the palm moves at most the arm's joint
   speed times its levers);
@@ -51,7 +52,8 @@ def check_run(config, objects, given=()) -> None:
     check_world(config.world, objects)
     world = config.world
     try:
-        for check in (_check_waits, _check_buoyancy, _check_camera, _check_noise, _check_timeout, _check_reach):
+        for check in (_check_waits, _check_buoyancy, _check_camera, _check_noise, _check_timeout, _check_reach,
+                      _check_layout):
             check(world, objects)
         _check_encoder(config.agent, objects)
     except _Joint as e:
@@ -73,6 +75,26 @@ def _plain(v):
 
 def _objects(objects) -> list:
     return list(objects.train) + list(objects.probe)
+
+
+def _check_layout(world, objects) -> None:
+    """The jar and the stand stand on the table, apart: a jar over the table's edge or through the stand is a scene
+    pybullet builds (static bodies overlap freely) in which nothing the robot does means what it should."""
+    from sim.water import CM
+
+    jar_r = (objects.jar.inner_diameter_cm / 2 + world.tank.wall_thickness_cm) * CM
+    (x0, x1), (y0, y1) = world.table_x, world.table_y
+    for key, (x, y), r in (("world.jar_xy", world.jar_xy, jar_r), ("world.stand_xy", world.stand_xy,
+                                                                     world.stand_radius)):
+        if not (x0 - 1e-9 <= x - r and x + r <= x1 + 1e-9 and y0 - 1e-9 <= y - r and y + r <= y1 + 1e-9):
+            raise _Joint([key, "world.table_x", "world.table_y"],
+                         f"{key} {_plain((x, y))} puts a footprint of radius {r * 100:.1f} cm off the table "
+                         f"(world.table_x {_plain(world.table_x)}, world.table_y {_plain(world.table_y)})")
+    gap = math.dist(world.jar_xy, world.stand_xy) - jar_r - world.stand_radius
+    if gap < 0:
+        raise _Joint(["world.jar_xy", "world.stand_xy", "world.stand_radius"],
+                     f"world.jar_xy {_plain(world.jar_xy)} and world.stand_xy {_plain(world.stand_xy)} overlap (the "
+                     f"jar's outer radius {jar_r * 100:.1f} cm and world.stand_radius {world.stand_radius:g} m)")
 
 
 def _check_waits(world, objects) -> None:
