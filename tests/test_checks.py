@@ -68,6 +68,8 @@ def test_the_default_config_passes_every_check():
     ({"encoder.mass_max_g": 2.0}, "encoder.mass_max_g", ["exclude object", "g)"]),
     # the depth range holds the stand's view, but not the objects seen from above
     ({"world.camera.far": 0.4}, "world.camera.far", ["outside world.camera.near"]),
+    # an IK of one iteration reaches nothing: named by the table of settings given
+    ({"world.ik.max_iters": 1}, "world.ik", ["cannot reach", "the world.ik settings given"]),
     # the jar through the stand, the stand off the table
     ({"world.jar_xy": [0.2, -0.2]}, "world.jar_xy", ["overlap", "world.stand_xy [0.2, -0.25]"]),
     ({"world.table_y": [-0.25, 0.3]}, "world.table_y", ["world.stand_xy [0.2, -0.25] puts a footprint of radius "

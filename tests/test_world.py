@@ -313,3 +313,23 @@ def test_the_widest_jar_runs_and_the_jar_camera_sees_its_whole_bottom():
             w.remove_object()
     finally:
         w.close()
+
+
+def test_an_episode_that_fails_in_a_non_default_world_is_one_error_naming_it():
+    """A camera that needs more pixels than it has passes the checks made up front, and fails when the world looks:
+    one WorldBuildError (the runner's one line, exit 1) naming the inspection and why; the default world raises
+    what it raises (a bug there keeps its traceback)."""
+    from dataclasses import replace
+
+    from train.physics import WorldBuildError
+    config = WorldConfig(camera=replace(WorldConfig().camera, min_pixels=10 ** 6))
+    w = World(load_objects(DEFAULT_OBJECTS_FILE), config, seed=0)
+    try:
+        with pytest.raises(WorldBuildError) as e:
+            w.inspect("red_heavy_cylinder")
+        assert "the inspection of 'red_heavy_cylinder' failed in this world: RuntimeError" in str(e.value)
+        assert "\n" not in str(e.value)
+        with pytest.raises(ValueError, match="no object named"):
+            w.inspect("unicorn")
+    finally:
+        w.close()

@@ -57,7 +57,8 @@ def check_run(config, objects, given=()) -> None:
             check(world, objects)
         _check_encoder(config.agent, objects)
     except _Joint as e:
-        key = next((k for k in e.keys if any(g == k or k.startswith(g + ".") for g in given)), e.keys[0])
+        key = next((k for k in e.keys if any(g == k or k.startswith(g + ".") or g.startswith(k + ".")
+                                             for g in given)), e.keys[0])
         raise ConfigError(f"{key}: {e.message}", key) from None
 
 
@@ -272,6 +273,9 @@ def _check_reach(world, objects) -> None:
         keys = (["world.jar_xy", "world.table_top_z", "world.robot_base"] if names[i] == "over the jar" else
                 ["world.stand_height", "world.stand_xy", "world.table_top_z", "world.robot_base"])
         settings = ", ".join(f"{k} {_plain(getattr(world, k.split('.')[1]))}" for k in keys)
+        if world.ik != default.ik:
+            keys.append("world.ik")
+            settings += " and the world.ik settings given"
         x, y, z = points[i]
         raise _Joint(keys, f"the arm cannot reach the palm's place {names[i]} ({x:.3f}, {y:.3f}, {z:.3f} m) with "
                            f"{settings} (sim.kinematics' reach)")
