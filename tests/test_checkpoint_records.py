@@ -6,7 +6,6 @@ import json
 import math
 
 import pytest
-import torch
 
 from test_checkpoint import FakePhysics, argv, fake_physics, paper_file, saved, tree, whole  # noqa: F401 fixtures
 from test_checkpoint_forged import forged, refused, write_forged

@@ -28,7 +28,8 @@ import math
 from train.config import ConfigError
 
 # the longest wait of the simulator: 1000 s of simulated time at pybullet's default 1/240 s step, 100x the default
-# settle timeout and 250x the default move timeout; a wait steps ~0.1-0.3 ms, so this bounds one wait to about a minute
+# settle timeout and 250x the default move timeout; a step of the default scene with an object out took 0.6 ms
+# (World.step(2400) timed, both cores busy), so one wait is at most about 2.5 minutes of stepping
 WAIT_STEPS = 240_000
 # the water follows a bobbing float while w dt stays below ~1.5, and the lightest object the objects file admits
 # (sim.objects.ObjectsConfig.min_mass_per_area_g_cm2) bobs at w dt <= 0.83 at 1/240 s in water of 1000 kg/m^3; w grows
@@ -38,9 +39,9 @@ BOB_WDT_AT_DEFAULT, BOB_WDT_MAX, DEFAULT_STEP_S, DEFAULT_DENSITY = 0.83, 1.5, 1.
 # negative once in 30,000 drops
 NOISE_SIGMAS = 4.0
 # an object whose size or mass lies this far outside the encoder's range, in units of the range (its log-unit
-# coordinate below -0.5 or above 1.5), is further from every unit of its map than half the map's width: the map
-# answers it with its edge unit at best, and with no activity at all far enough out (a 7 cm object on a range from
-# 50 cm: no activity, the hub refused to store it)
+# coordinate below -0.5 or above 1.5), lies half the range beyond the map's inputs (developmental samples span 0..1):
+# the map answers it with its edge unit at best, and with no activity at all far enough out (encoder.size_min_cm=50
+# with the default objects: "a present map has no activity to store", a traceback)
 ENCODER_MARGIN = 0.5
 
 
@@ -106,7 +107,7 @@ def _check_waits(world, objects) -> None:
         if steps > WAIT_STEPS:
             raise _Joint([key, "world.tank.timestep_s"],
                          f"{key} {seconds:g} s at world.tank.timestep_s {tank.timestep_s:g} s is {steps:,.0f} steps, "
-                         f"more than the {WAIT_STEPS:,} a wait of the simulator may take (about a minute of stepping)")
+                         f"more than the {WAIT_STEPS:,} a wait of the simulator may take (minutes of stepping)")
     per_wait = tank.settle_window_steps * tank.settle_windows
     if per_wait > tank.settle_timeout_s / tank.timestep_s:
         raise _Joint(["world.tank.settle_windows", "world.tank.settle_window_steps", "world.tank.settle_timeout_s",
@@ -254,9 +255,7 @@ def _check_reach(world, objects) -> None:
 
     from sim.kinematics import world_to_root
     from sim.robot import FACING_PLUS_X
-    from sim.world import _palm_down_root
-
-    from sim.world import WorldConfig
+    from sim.world import WorldConfig, _palm_down_root
 
     default = WorldConfig()
     if all(_get(world, k) == _get(default, k) for k in REACH_KEYS):

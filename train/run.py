@@ -273,8 +273,6 @@ def adopt_run(a) -> None:
     """--resume: the run's own settings from DIR/run.json (written when it started), so that --resume --out DIR
     alone continues it. A flag given must agree with them: one that contradicts one is refused, naming the stored
     value. A run from before run.json: the flags as given (the checkpoint's check refuses a mismatch)."""
-    import json
-
     from train.config import show
 
     path = a.out / RUN_NAME
@@ -282,7 +280,7 @@ def adopt_run(a) -> None:
         return
     try:
         from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
-        run = read_json(path, str(path), 4_000_000)   # the objects (at most 1 MB as a file) and the overrides
+        run = read_json(path, "the file", 4_000_000)   # the objects (at most 1 MB as a file) and the overrides
         stored, overrides = {k: run[k] for k in ("orders", "physics")}, run["overrides"]
         if not isinstance(overrides, dict) or not isinstance(run["objects"], dict):
             raise TypeError
@@ -624,8 +622,6 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
     """Refuse to resume with another config, naming the first key that differs: the agent's against the
     checkpoint's (as the experiment ran it), the world's against DIR/config.json (none: a run from before it was
     written, which built the default world)."""
-    import json
-
     from aesop_torch.agent import AgentConfig
     from sim.world import WorldConfig
     from train.config import config_dict, first_difference, flatten, show
@@ -642,7 +638,7 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
     if saved.is_file():
         try:
             from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
-            there = read_json(saved, str(saved), 1_000_000)["world"]
+            there = read_json(saved, "the file", 1_000_000)["world"]
             if not isinstance(there, dict):
                 raise TypeError
         except (OSError, ValueError, KeyError, TypeError) as e:
