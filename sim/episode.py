@@ -12,6 +12,7 @@ objects go through `inspect_object`: the same look, take, lift and weigh, then t
 
 from __future__ import annotations
 
+import math
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -40,6 +41,8 @@ class EpisodeOutcome:
     frames: list = field(default_factory=list)  # (H, W, 3) uint8 images if recording was asked
     # the file's values beside what was perceived (extent_cm, fill, mass_g), for the logs; never shown to the agent
     true: dict = field(default_factory=dict)
+    # the object came to rest inside the jar (False: the arm never got it there, and the rise is not its)
+    delivered: bool = True
 
 
 @dataclass
@@ -165,6 +168,7 @@ def drop_into_jar(world, name: str, record=None, t0: float | None = None) -> Epi
         world.go_home()
         settled = world.settle()
         sank = _rests_on_bottom(world, body)
+        delivered = in_jar(world, body)
         level_after = world.level_reading_cm()
         reached_after = world.goal_reachable()
     finally:
@@ -175,7 +179,20 @@ def drop_into_jar(world, name: str, record=None, t0: float | None = None) -> Epi
         level_before_cm=level_before, level_after_cm=level_after,
         archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
         goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
-        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=spec.true_values())
+        wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=spec.true_values(),
+        delivered=delivered)
+
+
+def in_jar(world, body: int) -> bool:
+    """Whether the body is in the jar: its centre within the jar's inner wall, its lowest point between the jar's
+    bottom and its rim (a tall float may stick out above the rim; an object the arm never carried is on the stand or
+    in the hand, outside the wall)."""
+    tank, cl = world.tank, world.client
+    pos = p.getBasePositionAndOrientation(body, physicsClientId=cl)[0]
+    low = p.getAABB(body, physicsClientId=cl)[0][2]
+    radius = tank.jar.inner_diameter_cm / 2 * CM
+    off = math.hypot(pos[0] - tank.center[0], pos[1] - tank.center[1])
+    return off <= radius and tank.bottom_z - 0.01 <= low <= tank.rim_z   # 1 cm: the AABB's margin and the plate
 
 
 def _rests_on_bottom(world, body: int) -> bool:

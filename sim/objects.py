@@ -30,9 +30,7 @@ from __future__ import annotations
 
 import json
 import math
-import os
 import re
-import stat
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -335,56 +333,13 @@ def load_objects(path, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:
     """Read and validate an objects file; ObjectsFileError (one line) if anything is wrong. Reading is bounded
     (a regular file of at most MAX_FILE_BYTES: `/dev/zero` or a pipe is refused, not read forever), and so are
     nesting depth and integer length, which would otherwise end in a RecursionError or an OverflowError."""
+    from sim.input_files import InputFileError, read_json
     try:
-        # O_NONBLOCK: opening a FIFO must not wait for a writer; a regular file reads as usual
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-        with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise ObjectsFileError("the objects file is not a regular file")
-            raw = f.read(MAX_FILE_BYTES + 1)
-        if len(raw) > MAX_FILE_BYTES:
-            raise ObjectsFileError(f"the objects file is larger than {MAX_FILE_BYTES:,} bytes")
-        text = raw.decode("utf-8")
-    except (OSError, UnicodeDecodeError) as e:
-        raise ObjectsFileError(f"cannot read the objects file: {type(e).__name__}: {e}") from None
-    depth = _nesting(text)
-    if depth > MAX_NESTING:
-        raise ObjectsFileError(f"the objects file nests {depth} levels deep (at most {MAX_NESTING})")
-    try:
-        data = json.loads(text, parse_int=_bounded_int)
-    except json.JSONDecodeError as e:
-        raise ObjectsFileError(f"malformed JSON at line {e.lineno} column {e.colno}: {e.msg}") from None
-    except RecursionError:
-        raise ObjectsFileError(f"the objects file nests too deeply (at most {MAX_NESTING} levels)") from None
+        # NaN and Infinity are let through to the schema, which names the field that holds one
+        data = read_json(path, "the objects file", MAX_FILE_BYTES, MAX_NESTING, strict=False)
+    except InputFileError as e:
+        raise ObjectsFileError(str(e)) from None
     return parse_objects(data, config)
-
-
-def _bounded_int(literal: str) -> int:
-    if len(literal.lstrip("-")) > MAX_DIGITS:
-        raise ObjectsFileError(f"an integer of {len(literal.lstrip('-'))} digits (at most {MAX_DIGITS}): "
-                               f"{literal[:12]}...")
-    return int(literal)
-
-
-# a string (an unterminated one runs to the end of the text) or a bracket. The unrolled loop never backtracks
-# (its two branches start on different characters, and the closing quote is optional), so one pass is linear in the
-# text, however its quotes and backslashes fall. The previous pattern, '"(?:[^"\\]|\\.)*"', failed from every
-# quote of an unterminated string of escaped quotes: quadratic, ~35 min on a 1 MB file.
-_TOKEN = re.compile(r'"[^"\\]*(?:\\.[^"\\]*)*"?|[\[\]{}]', re.DOTALL)
-
-
-def _nesting(text: str) -> int:
-    """The deepest nesting of [ and { outside strings (the file is not yet known to be valid JSON). Linear time."""
-    depth = deepest = 0
-    for m in _TOKEN.finditer(text):
-        c = m.group()
-        if c in "[{":
-            depth += 1
-            if depth > deepest:
-                deepest = depth
-        elif c in "]}":
-            depth -= 1
-    return deepest
 
 
 def parse_objects(data, config: ObjectsConfig = ObjectsConfig()) -> ObjectSet:

@@ -474,16 +474,37 @@ class World:
     def run_episode(self, name: str, record=None):
         """Drop the named object into the jar and measure what happened: an EpisodeOutcome."""
         from sim.episode import drop_episode
-        return drop_episode(self, name, record)
+        with self._config_failures("drop", name):
+            return drop_episode(self, name, record)
 
     def inspect(self, name: str) -> dict:
         """Perceive, lift, weigh and put back the named object (no drop): its measurement dict."""
         from sim.episode import inspect_object
-        return inspect_object(self, name)
+        with self._config_failures("inspection", name):
+            return inspect_object(self, name)
 
     def drop_next(self, name: str, record=None):
         """A drop of a goal trial (sim/trial.py): the jar is not reset, what was dropped before stays in the water
         (it is no longer this world's `body`, so the stand takes the next object). An EpisodeOutcome."""
         from sim.trial import drop_next
         self.body = None
-        return drop_next(self, name, record)
+        with self._config_failures("drop", name):
+            return drop_next(self, name, record)
+
+    @contextmanager
+    def _config_failures(self, what: str, name: str):
+        """An episode that fails (the palm cannot reach, the camera does not see the object) in a world built from
+        a config other than the default: train.physics.WorldBuildError naming the drop and the reason, one line (the
+        runner ends on it, exit 1, its last checkpoint kept). Its settings passed every check made up front
+        (train/config_checks.py), so this is what the world found out by trying. With the default config the error
+        is raised as it is: a failure there is a bug, with its traceback."""
+        try:
+            yield
+        except (RuntimeError, ValueError, ArithmeticError) as e:
+            if self.config == WorldConfig() or name not in {o.name for o in self.objects.train + self.objects.probe
+                                                               + self.objects.pool}:
+                raise
+            from train.physics import WorldBuildError
+            lines = str(e).strip().splitlines()
+            raise WorldBuildError(f"the {what} of '{name}' failed in this world: {type(e).__name__}: "
+                                  f"{lines[0] if lines else ''}") from None

@@ -133,10 +133,11 @@ def _roll_back(s):
     (_set(("experiment", "config", "rules", "certainty_step"), math.nan), "rules.certainty_step"),
     (_set(("experiment", "config", "hub", "n_neurons"), 10 ** 9), "hub.n_neurons"),
     (_set(("experiment", "config", "bogus"), 1), "unknown key bogus"),
-    # a valid config whose agents would take 2 x 3 x (20 x 10^6 + 10^6) bytes: refused before they are built
-    (lambda s: (s["experiment"]["config"]["memory"].update(cols=10 ** 6),
-                s["experiment"]["config"]["hub"].update(n_neurons=10 ** 6)),
-     "config asks for agents of more than 126,000,000 bytes"),
+    # a valid config whose agents would take 2 x 3 x (20 x 1000 + 1000) bytes, more than the file: refused before
+    # they are built (the largest sheet train.config.RANGES admits, 1000 columns)
+    (lambda s: (s["experiment"]["config"]["memory"].update(cols=1000),
+                s["experiment"]["config"]["hub"].update(n_neurons=1000)),
+     "config asks for agents of more than 126,000 bytes"),
     # outcomes and probes
     (lambda s: s["experiment"]["outcomes"]["red_light_cylinder"]["measurement"].update(mass_g=-14.0),
      "mass_g -14.0 not positive"),

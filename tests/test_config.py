@@ -117,7 +117,7 @@ def test_a_model_switch_takes_the_models_defaults_and_keeps_what_was_changed():
     ("rules.uncertain_decay=nan", "rules.uncertain_decay takes a finite number, got nan"),
     ("readout_huber=inf", "readout_huber takes a finite number, got inf"),
     ("rules.same_rel=-0.1", "rules.same_rel takes a number (float) >= 0, got -0.1"),
-    ("memory.max_episodes=-1", "memory.max_episodes takes an integer (int) >= 0, got -1"),
+    ("memory.max_episodes=-1", "memory.max_episodes takes an integer (int) from 0 to 2000, got -1"),
     ("rules.certainty_step=1.5", "rules.certainty_step takes a number (float) from 0 to 1, got 1.5"),
     ("recall_sharpness=0", "recall_sharpness: AgentConfig.recall_sharpness must be > 0"),
     ("memory.cue_rows=[25]", "memory.cue_rows: MemoryConfig.cue_rows must be distinct rows in 0..19"),
@@ -162,7 +162,7 @@ def test_the_worlds_config_is_reached_under_world():
     assert WorldConfig().mass_noise_g == 1.0
     for text, message in (("world.level_noise_cm=-1", "world.level_noise_cm takes a number (float) >= 0"),
                           ("world.jar_xy=[0.3]", "world.jar_xy takes an array of 2 numbers, got [0.3]"),
-                          ("world.tank.staves=2", "world.tank.staves takes an integer (int) >= 3"),
+                          ("world.tank.staves=2", "world.tank.staves takes an integer (int) from 3 to 256"),
                           ("world.bogus=1", "unknown key world.bogus (world has: tank, robot"),
                           ("world.tank=1", "world.tank is a table of settings"),
                           ("rules.uncertain_decay=1", "is not a key of the world's config")):

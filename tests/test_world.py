@@ -33,7 +33,7 @@ def heavy(world):
 
 def test_heavy_cylinder_episode(world, heavy):
     out, body = heavy
-    assert isinstance(out, EpisodeOutcome) and out.name == "red_heavy_cylinder" and out.settled
+    assert isinstance(out, EpisodeOutcome) and out.name == "red_heavy_cylinder" and out.settled and out.delivered
     assert out.archimedes_cm3 == pytest.approx(365.3, abs=0.1)
     assert out.observed_cm3 == pytest.approx(out.archimedes_cm3, rel=0.02)
     assert out.level_before_cm == pytest.approx(14.0, abs=0.002)
@@ -72,6 +72,21 @@ def test_light_cylinder_floats_and_the_goal_stays_out_of_reach(world):
     assert not out.goal_reachable_before and not out.goal_reached_after
     assert out.measurement["mass_g"] == pytest.approx(14.0, abs=4 * NOISE_G + 0.5)
     assert out.frames == []
+    assert out.delivered   # afloat in the jar, below its rim
+
+
+def test_an_object_on_the_stand_is_not_in_the_jar(world):
+    """What EpisodeOutcome.delivered reads: an object the arm never carried is outside the jar."""
+    from sim.episode import in_jar
+    world.reset()
+    body = world.place_on_stand("red_heavy_cylinder")
+    try:
+        assert not in_jar(world, body)
+        p.resetBasePositionAndOrientation(body, [*world.config.jar_xy, world.tank.bottom_z + 0.06], [0, 0, 0, 1],
+                                          physicsClientId=world.client)
+        assert in_jar(world, body)
+    finally:
+        world.reset()
 
 
 def test_reach_threshold_is_the_rim(world):
@@ -268,6 +283,7 @@ def test_episodes_at_the_height_limit_finish():
         w.close()
     assert sinker.sank and sinker.observed_cm3 == pytest.approx(sinker.archimedes_cm3, rel=0.02)
     assert not floater.sank and floater.observed_cm3 == pytest.approx(30.0, rel=0.02)
+    assert sinker.delivered and floater.delivered
 
 
 def test_the_widest_jar_runs_and_the_jar_camera_sees_its_whole_bottom():
@@ -283,6 +299,7 @@ def test_the_widest_jar_runs_and_the_jar_camera_sees_its_whole_bottom():
     try:
         out = w.run_episode("disc")
         assert out.settled and not out.sank and out.observed_cm3 == pytest.approx(least, rel=0.02, abs=0.2)
+        assert out.delivered
         w.reset()
         ax, ay = w.away
         inner = (d / 2 - 0.6) * CM
@@ -294,5 +311,25 @@ def test_the_widest_jar_runs_and_the_jar_camera_sees_its_whole_bottom():
             w.settle()
             assert _rests_on_bottom(w, body), (ux, uy)
             w.remove_object()
+    finally:
+        w.close()
+
+
+def test_an_episode_that_fails_in_a_non_default_world_is_one_error_naming_it():
+    """A camera that needs more pixels than it has passes the checks made up front, and fails when the world looks:
+    one WorldBuildError (the runner's one line, exit 1) naming the inspection and why; the default world raises
+    what it raises (a bug there keeps its traceback)."""
+    from dataclasses import replace
+
+    from train.physics import WorldBuildError
+    config = WorldConfig(camera=replace(WorldConfig().camera, min_pixels=10 ** 6))
+    w = World(load_objects(DEFAULT_OBJECTS_FILE), config, seed=0)
+    try:
+        with pytest.raises(WorldBuildError) as e:
+            w.inspect("red_heavy_cylinder")
+        assert "the inspection of 'red_heavy_cylinder' failed in this world: RuntimeError" in str(e.value)
+        assert "\n" not in str(e.value)
+        with pytest.raises(ValueError, match="no object named"):
+            w.inspect("unicorn")
     finally:
         w.close()

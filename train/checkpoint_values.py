@@ -22,18 +22,31 @@ def state_problem(e: dict, run: dict) -> str | None:
         return f"the run's objects: {err}"
     if [o.name for o in objects.train] != e["train_names"] or [o.name for o in objects.probe] != e["probe_names"]:
         return "the run's objects are not the experiment's train and probe objects"
-    return (_outcomes_problem(e, objects.jar) or _records_problem(e) or _agent_values_problem(e))
+    jar_cm3 = objects.jar.area_cm2 * objects.jar.height_cm
+    return (_outcomes_problem(e, objects.jar) or _records_problem(e, jar_cm3) or _agent_values_problem(e))
+
+
+# what the senses can give for an object the objects file admits (sim.objects.ObjectsConfig): the least fill of its
+# shapes is a sphere's, pi / 6 = 0.52 (MIN_FILL: half of it, for the camera's error); sides of 1 cm up to the 29 cm
+# jar (MIN_EXTENT_CM, MAX_EXTENT_CM: 10x either way); 1 kg at most, the hand's noise at most a quarter of the
+# heaviest object (train/config_checks.py), so MAX_MASS_G: 10x
+MIN_FILL, MIN_EXTENT_CM, MAX_EXTENT_CM, MAX_MASS_G = 0.25, 0.1, 290.0, 10_000.0
 
 
 def _measurement_problem(m: dict) -> str | None:
     """What the senses cannot have measured: a mean pixel colour outside 0..1, a fill (volume over bounding box)
-    outside (0, 1], an extent or a felt mass that is not positive (the encoders take their logs)."""
+    outside [MIN_FILL, 1], an extent or a felt mass that is not positive (the encoders take their logs) or beyond
+    what an object the objects file admits could give."""
     if not all(0.0 <= x <= 1.0 for x in m["rgb"]):
         return f"rgb {m['rgb']} outside 0..1"
-    if not 0.0 < m["fill"] <= 1.0:
-        return f"fill {m['fill']} outside (0, 1]"
+    if not MIN_FILL <= m["fill"] <= 1.0:
+        return f"fill {m['fill']} outside [{MIN_FILL}, 1]"
     if not all(x > 0 for x in m["extent_cm"]) or not m["mass_g"] > 0:
         return f"extent_cm {m['extent_cm']} or mass_g {m['mass_g']} not positive"
+    if not all(MIN_EXTENT_CM <= x <= MAX_EXTENT_CM for x in m["extent_cm"]):
+        return f"extent_cm {m['extent_cm']} outside {MIN_EXTENT_CM:g} .. {MAX_EXTENT_CM:g} cm"
+    if not m["mass_g"] <= MAX_MASS_G:
+        return f"mass_g {m['mass_g']:g} above {MAX_MASS_G:g} g"
     return None
 
 
@@ -43,7 +56,7 @@ def _outcomes_problem(e: dict, jar) -> str | None:
     jar_cm3 = jar.area_cm2 * jar.height_cm
     for kind, table in (("outcome", e["outcomes"]), ("probe", e["probes"])):
         for name, o in table.items():
-            if p := _measurement_problem(o["measurement"]):
+            if p := _measurement_problem(o["measurement"]) or ("true" in o and _true_problem(o["true"])):
                 return f"{kind} of {name!r}: {p}"
             volumes = [o["archimedes_cm3"]] + ([o["observed_cm3"]] if kind == "outcome" else [])
             if not 0.0 < o["archimedes_cm3"] <= jar_cm3 or any(abs(v) > jar_cm3 for v in volumes):
@@ -52,14 +65,89 @@ def _outcomes_problem(e: dict, jar) -> str | None:
     return None
 
 
-def _records_problem(e: dict) -> str | None:
-    """Each order's records name the objects its order dropped, in that order."""
+RECORD_KEYS = {"object", "predicted_cm3", "observed_cm3", "archimedes_cm3", "rules", "knowledge", "encoded",
+               "goal_reached", "probe_rel_error", "perceived"}
+RECORD_OPTIONAL = {"true"}   # the file's values, for the logs
+TRUE_KEYS = {"extent_cm", "fill", "mass_g"}   # sim.objects.ObjectSpec.true_values
+# a prediction is a weighted average of recalled rewards (paper) or a fit over them (extended): beyond 100 jars of
+# water it is no reading of these objects
+PREDICTION_JARS = 100.0
+# a relative error beyond this is no probe's (a prediction within PREDICTION_JARS jars of a probe's >= 0.1 cm^3)
+MAX_REL_ERROR = 1e9
+
+
+def _number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def _records_problem(e: dict, jar_cm3: float = math.inf) -> str | None:
+    """Each order's records name the objects its order dropped, in that order, and every field of a record is what
+    train.experiment.Experiment.step writes, of its type and in its range (summary.json, the figure and the logs
+    are made from them as they are: a NaN or a string in a number's place would reach them)."""
+    from aesop_torch.rules import PROPERTIES, RULE_NAMES, STATES
+
     names = e["train_names"]
     for b, (order, records) in enumerate(zip(e["orders"], e["records"])):
         for i, rec in enumerate(records):
+            where = f"order {b + 1}'s episode {i + 1}"
             if rec.get("object") != names[order[i]] or not isinstance(rec.get("encoded"), bool):
-                return f"order {b + 1}'s episode {i + 1} is not a record of {names[order[i]]!r}"
+                return f"{where} is not a record of {names[order[i]]!r}"
+            if not RECORD_KEYS <= set(rec) <= RECORD_KEYS | RECORD_OPTIONAL:
+                missing, extra = sorted(RECORD_KEYS - set(rec)), sorted(map(str, set(rec) - RECORD_KEYS -
+                                                                            RECORD_OPTIONAL))
+                return (f"{where}'s record keys: missing {', '.join(missing) or 'none'}, unexpected "
+                        f"{', '.join(map(_cut, extra)) or 'none'}")
+            if p := _record_problem(rec, jar_cm3, PROPERTIES, RULE_NAMES, STATES):
+                return f"{where}: {p}"
     return None
+
+
+def _cut(text: str) -> str:
+    """A string from the file as a message quotes it: escaped (no control character reaches a terminal), cut."""
+    shown = repr(text)
+    return shown if len(shown) <= 40 else shown[:37] + "..."
+
+
+def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -> str | None:
+    for k in ("observed_cm3", "archimedes_cm3"):
+        if not _number(rec[k]) or abs(rec[k]) > jar_cm3:
+            return f"{k} {_cut(str(rec[k]))} is not a volume the jar holds ({jar_cm3:.0f} cm^3)"
+    v = rec["predicted_cm3"]
+    if v is not None and (not _number(v) or abs(v) > PREDICTION_JARS * jar_cm3):
+        return f"predicted_cm3 {_cut(str(v))} is not a prediction (a finite volume within {PREDICTION_JARS:g} jars)"
+    v = rec["probe_rel_error"]
+    if v is not None and (not _number(v) or not 0 <= v <= MAX_REL_ERROR):
+        return f"probe_rel_error {_cut(str(v))} is not a relative error"
+    if not isinstance(rec["goal_reached"], bool):
+        return f"goal_reached {_cut(str(rec['goal_reached']))} is not true or false"
+    knowledge, rules = rec["knowledge"], rec["rules"]
+    if not isinstance(knowledge, dict) or not isinstance(rules, dict) or not set(properties) <= set(knowledge) \
+            or set(rules) != set(knowledge):
+        return f"knowledge and rules must name the same properties, among them {', '.join(properties)}"
+    for prop, k in knowledge.items():
+        if not isinstance(k, dict) or set(k) != {"state", "certainty"} or k["state"] not in states \
+                or not _number(k["certainty"]) or not 0 <= k["certainty"] <= 1:
+            return f"knowledge of {_cut(str(prop))} is not a state of {', '.join(states)} with a certainty in 0..1"
+        if rules[prop] not in rule_names:
+            return f"rules of {_cut(str(prop))}: {_cut(str(rules[prop]))} is not one of {', '.join(rule_names)}"
+    m = rec["perceived"]
+    if not _measurement_shape_ok(m) or (p := _measurement_problem(m)):
+        return f"perceived: {p if _measurement_shape_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
+    if "true" in rec and (p := _true_problem(rec["true"])):
+        return p
+    return None
+
+
+def _true_problem(true) -> str | None:
+    if not (isinstance(true, dict) and set(true) <= TRUE_KEYS and all(
+            _number(x) or (isinstance(x, list) and len(x) == 3 and all(map(_number, x))) for x in true.values())):
+        return f"true is not the file's values ({', '.join(sorted(TRUE_KEYS))}: numbers)"
+    return None
+
+
+def _measurement_shape_ok(m) -> bool:
+    from train.checkpoint import _measurement_ok
+    return _measurement_ok(m)
 
 
 def _agent_values_problem(e: dict) -> str | None:

@@ -84,10 +84,22 @@ RANGES = {
     "encoder.size_min_cm": POSITIVE, "encoder.size_max_cm": POSITIVE, "encoder.mass_min_g": POSITIVE,
     "encoder.mass_max_g": POSITIVE, "encoder.max_aspect": AT_LEAST_ONE,
     # sizes of tensors: neurons, rows, assemblies, episodes, chunks, samples, epochs
-    "hub.n_neurons": AT_LEAST_ONE, "hub.assembly_size": AT_LEAST_ONE, "hub.rows": AT_LEAST_ONE,
-    "hub.max_assemblies": AT_LEAST_ONE, "memory.rows": AT_LEAST_ONE, "memory.cols": AT_LEAST_ONE,
-    "memory.chunk_agents": AT_LEAST_ONE, "memory.chunk_elements": AT_LEAST_ONE, "som_samples": AT_LEAST_ONE,
-    "som_epochs": AT_LEAST_ONE,
+    # the hub is the sheet's 12 object rows (hub.rows x hub.n_neurons = 12 x memory.cols, at most 12 x 1000 below);
+    # a memory and a hub hold at most the objects of one life (sim.objects.ObjectsConfig.max_objects, 2000), and an
+    # episode is compared with at most the episodes they hold
+    "hub.n_neurons": (1, True, 12_000), "hub.assembly_size": (1, True, 12_000), "hub.rows": (1, True, 12_000),
+    "hub.max_assemblies": (1, True, 2000), "memory.max_episodes": (0, True, 2000), "compare_with": (0, True, 2000),
+    # the sheet's neurons (memory.rows x memory.cols: the paper's 20 x 50) are each driven by every other in a recall
+    # step, so its work grows as their square: 100 x 1000 is 10^4x the paper's (the hub is the sheet's object rows,
+    # hub.rows x hub.n_neurons = 12 x memory.cols, so this bounds it too); a recall step settles in ~5 clamped and ~2
+    # free steps (aesop_torch/memory.py), 1000 of either is a recall that does not settle; a chunk of 2^31 elements
+    # is 8 GB of float32 working tensors at once
+    "memory.rows": (1, True, 100), "memory.cols": (1, True, 1000), "memory.cue_steps": (0, True, 1000),
+    "memory.free_steps": (0, True, 1000), "memory.misses": (0, True, 1000),
+    "memory.chunk_agents": (1, True, 1 << 20), "memory.chunk_elements": (1, True, 1 << 31),
+    # the maps' developmental samples are held at once (1e6 x the 22-d word map's inputs x 4 bytes: 88 MB) and each
+    # epoch is a pass over them; 4000 x 30 (the defaults) take ~0.3 s, so the bounds' product is about an hour
+    "som_samples": (1, True, 1_000_000), "som_epochs": (1, True, 10_000),
     # a fraction of the bump's peak; certainty after n firings is 1 - (1 - step)^n, in 0..1 only for a step in 0..1
     "hub.store_floor": FRACTION, "rules.certainty_step": FRACTION,
     # the cue relative to its peak raised to this power: <= 0 would invert or flatten it; a strength floor
@@ -130,14 +142,24 @@ RANGES = {
     "world.tank.water.shortcut_margin_m": NON_NEGATIVE, "world.tank.water.level_band_m": NON_NEGATIVE,
     "world.robot.body_max_force": NON_NEGATIVE, "world.robot.position_gain": NON_NEGATIVE,
     "world.robot.velocity_gain": NON_NEGATIVE, "world.robot.max_velocity": POSITIVE,
-    # counts of steps, iterations, points, pixels, waypoints that something is divided by, averaged or stepped over
-    "world.tank.solver_iterations": AT_LEAST_ONE, "world.tank.settle_window_steps": AT_LEAST_ONE,
-    "world.tank.settle_windows": AT_LEAST_ONE, "world.tank.water.points_per_body": AT_LEAST_ONE,
-    "world.tank.water.level_max_iterations": AT_LEAST_ONE, "world.ik.max_iters": AT_LEAST_ONE,
-    "world.ik.check_every": AT_LEAST_ONE, "world.camera.width": AT_LEAST_ONE, "world.waypoints": AT_LEAST_ONE,
-    "world.weigh_steps": AT_LEAST_ONE,
-    # the jar's round wall is a polygon of this many staves
-    "world.tank.staves": (3, True, None),
+    # counts of steps, iterations, points, pixels, waypoints that something is divided by, averaged or stepped over;
+    # each bounded where more is only more work: a wait of the simulator at most 240,000 steps (1000 s of simulated
+    # time, train/config_checks.py WAIT_STEPS); pybullet's solver converges in its default 50 iterations; 60 IK
+    # iterations solve every target the bench box reaches (sim/kinematics.py); the level's Newton iterations reach
+    # its 0.1 nm tolerance in a handful (30 by default); 1000 waypoints are 0.3 mm apart on the 31 cm carry; a render
+    # costs ~20 ms at 256 px and 64x that at 2048; 4096 points already sample a body's volume to 0.5 % (16x that)
+    "world.tank.solver_iterations": (1, True, 1000), "world.tank.settle_window_steps": (1, True, 240_000),
+    "world.tank.settle_windows": (1, True, 240_000), "world.tank.water.points_per_body": (1, True, 65_536),
+    "world.tank.water.level_max_iterations": (1, True, 200), "world.ik.max_iters": (1, True, 10_000),
+    "world.ik.check_every": (1, True, 10_000), "world.camera.width": (1, True, 2048),
+    "world.waypoints": (1, True, 1000),
+    # a 40-restart solve reaches no target the default 7 miss on the bench box (sim/kinematics.py)
+    "world.ik.restarts": (0, True, 100),
+    "world.weigh_steps": (1, True, 240_000), "world.weigh_wait_steps": (0, True, 240_000),
+    "world.camera.min_pixels": (0, True, 2048 * 2048),
+    # the jar's round wall is a polygon of this many staves (pybullet builds 16 to a link; 256 make the polygon's
+    # area within 0.01 % of the circle's)
+    "world.tank.staves": (3, True, 256),
     # the run's seed (the agent's is the run's: train.experiment sets it)
     "seed": (0, True, MAX_SEED - 1),
 }
@@ -234,9 +256,27 @@ def load_toml(path) -> dict:
     try:
         return flatten(tomllib.loads(text))
     except tomllib.TOMLDecodeError as e:
-        raise ConfigError(f"{path}: not valid TOML: {_one_line(e)}") from None
+        raise ConfigError(f"{path}: {_repeated(text, e) or 'not valid TOML: ' + _one_line(e)}") from None
     except (RecursionError, ValueError, MemoryError) as e:
         raise ConfigError(f"{path}: not a file this config reads ({_one_line(e) or 'nested too deep'})") from None
+
+
+_TOML_AT = re.compile(r"\(at line (\d+), column \d+\)")
+
+
+def _repeated(text: str, e: Exception) -> str | None:
+    """tomllib's refusal of a key or table given twice ("Cannot overwrite a value (at line 3, column 5)", "Cannot
+    declare ('rules',) twice") as a line naming the key, or None for another error."""
+    message = _one_line(e)
+    at = _TOML_AT.search(message)
+    if not at or not message.startswith(("Cannot overwrite a value", "Cannot declare")):
+        return None
+    lines = text.splitlines()
+    line = int(at.group(1))
+    said = lines[line - 1].strip() if 0 < line <= len(lines) else ""
+    key = said.strip("[] ") if said.startswith("[") else said.partition("=")[0].strip()
+    return (f"{_show(key)} is given twice (line {line}): TOML takes a key or a table once; remove one" if key else
+            None)
 
 
 def flatten(doc: dict, prefix: str = "") -> dict:

@@ -18,6 +18,7 @@ import torch
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.rules import RULE_NAMES
 from train import checkpoint
+from train.physics import WorldBuildError
 
 MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
 
@@ -34,7 +35,9 @@ def plain_measurement(m: dict) -> dict:
 
 
 def outcome_record(outcome) -> dict:
-    """The part of a world EpisodeOutcome the experiment keeps (plain numbers: it goes into checkpoints)."""
+    """The part of a world EpisodeOutcome the experiment keeps (plain numbers: it goes into checkpoints). An outcome
+    that is not a measurement of the object's drop is never kept (`check_outcome`)."""
+    check_outcome(outcome)
     return {
         "measurement": plain_measurement(outcome.measurement),
         "observed_cm3": float(outcome.observed_cm3),
@@ -44,6 +47,38 @@ def outcome_record(outcome) -> dict:
         "sank": bool(outcome.sank),
         "true": dict(outcome.true),   # the file's extent, fill and mass, for the logs: never given to the agent
     }
+
+
+class BadOutcome(WorldBuildError):
+    """A drop's outcome that must not be recorded (check_outcome); the runner ends on it as on a world its workers
+    could not build: one line, exit 1, the last checkpoint kept."""
+
+
+def check_outcome(outcome) -> None:
+    """Raise BadOutcome (a train.physics.WorldBuildError: the run ends in one line, exit 1, its last checkpoint kept)
+    for a drop whose outcome would teach the agent something the world did not do: the object not delivered into
+    the jar (the rise read is not its), a measurement that is not finite, or a negative displaced volume (no object
+    lowers the water: the level's noise drowned the rise)."""
+    name = getattr(outcome, "name", None) or "the object"
+    name = f"object {name!r}" if name != "the object" else name
+    if getattr(outcome, "delivered", True) is False:
+        raise BadOutcome(f"{name} was not delivered into the jar (the arm did not get it there: world.move_timeout_s, "
+                         "world.robot.max_velocity or the reach); its episode is not recorded")
+    values = [outcome.observed_cm3, outcome.archimedes_cm3] + [
+        x for v in outcome.measurement.values() for x in (v if hasattr(v, "__len__") else [v])]
+    if not all(isinstance(x, (int, float)) and math.isfinite(x) for x in map(_number, values)):
+        raise BadOutcome(f"{name}'s drop measured a non-finite value (displaced {outcome.observed_cm3!r} cm^3, "
+                         f"measurement {plain_measurement(outcome.measurement)}); its episode is not recorded")
+    if outcome.observed_cm3 < 0:
+        raise BadOutcome(f"{name}'s drop read a negative displaced volume ({float(outcome.observed_cm3):.1f} cm^3: "
+                         "the level's noise swamped its rise, world.level_noise_cm); its episode is not recorded")
+
+
+def _number(x):
+    try:
+        return float(x)
+    except (TypeError, ValueError):
+        return math.nan
 
 
 def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=None, seed: int = 0

@@ -274,20 +274,20 @@ def adopt_run(a) -> None:
     """--resume: the run's own settings from DIR/run.json (written when it started), so that --resume --out DIR
     alone continues it. A flag given must agree with them: one that contradicts one is refused, naming the stored
     value. A run from before run.json: the flags as given (the checkpoint's check refuses a mismatch)."""
-    import json
-
     from train.config import show
 
     path = a.out / RUN_NAME
     if path.is_symlink() or not path.is_file():
         return
     try:
-        run = json.loads(path.read_text())
+        from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
+        run = read_json(path, "the file", 4_000_000)   # the objects (at most 1 MB as a file) and the overrides
         stored, overrides = {k: run[k] for k in ("orders", "physics")}, run["overrides"]
         if not isinstance(overrides, dict) or not isinstance(run["objects"], dict):
             raise TypeError
     except (OSError, ValueError, KeyError, TypeError) as e:
-        raise UsageError(f"--resume: {path} is damaged ({type(e).__name__}); nothing was changed") from None
+        why = str(e) if isinstance(e, InputFileError) else type(e).__name__
+        raise UsageError(f"--resume: {path} is damaged ({why}); nothing was changed") from None
     for flag, key in (("--orders", "orders"), ("--physics", "physics")):
         given = getattr(a, key)
         if given is not None and given != stored[key]:
@@ -338,11 +338,12 @@ def resolve_config(args, objects):
     """The run's config (train.config.RunConfig: agent and world) from args.overrides, checked against the
     dataclasses and against the objects (a world its workers could not build). Imports torch and the simulator:
     after the first line. UsageError naming where the refused key came from."""
-    from train.config import ConfigError, check_world, resolve
+    from train.config import ConfigError, resolve
+    from train.config_checks import check_run
 
     try:
         config = resolve(args.overrides)
-        check_world(config.world, objects)
+        check_run(config, objects, args.overrides)   # what the workers build; settings that cannot work together
     except ConfigError as e:
         raise UsageError(f"{_origin(args.origins, e.key)}{e}") from None
     return config
@@ -622,8 +623,6 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
     """Refuse to resume with another config, naming the first key that differs: the agent's against the
     checkpoint's (as the experiment ran it), the world's against DIR/config.json (none: a run from before it was
     written, which built the default world)."""
-    import json
-
     from aesop_torch.agent import AgentConfig
     from sim.world import WorldConfig
     from train.config import config_dict, first_difference, flatten, show
@@ -639,11 +638,13 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
     saved = args.out / CONFIG_NAME
     if saved.is_file():
         try:
-            there = json.loads(saved.read_text())["world"]
+            from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
+            there = read_json(saved, "the file", 1_000_000)["world"]
             if not isinstance(there, dict):
                 raise TypeError
         except (OSError, ValueError, KeyError, TypeError) as e:
-            raise UsageError(f"--resume: {saved} is damaged ({type(e).__name__}); nothing was changed") from None
+            why = str(e) if isinstance(e, InputFileError) else type(e).__name__
+            raise UsageError(f"--resume: {saved} is damaged ({why}); nothing was changed") from None
     else:
         there = config_dict(WorldConfig())
     here = {"world": config_dict(args.run_config.world)}

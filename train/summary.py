@@ -14,6 +14,7 @@ ran it and the world's; `commit` names the code (`git describe --always --dirty`
 from __future__ import annotations
 
 import importlib.metadata
+import math
 import os
 import subprocess
 import sys
@@ -101,7 +102,19 @@ def build_summary(exp, population: dict | None = None, config: dict | None = Non
             "final_knowledge": keys,
             "final_probe_rel_error": population["final_probe_rel_error"],
         }
-    return summary
+    return json_safe(summary)
+
+
+def json_safe(x):
+    """x with every non-finite float as None (JSON's null): json.dumps would write a bare NaN or Infinity, which no
+    JSON reader takes. Tuples become lists; strings stay (json.dumps escapes their control characters)."""
+    if isinstance(x, float):
+        return x if math.isfinite(x) else None
+    if isinstance(x, dict):
+        return {k: json_safe(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [json_safe(v) for v in x]
+    return x
 
 
 def knowledge_table(summary: dict) -> str:
