@@ -298,3 +298,24 @@ def test_ctrl_c_ends_in_one_line_and_resume_is_exact(paper_file, whole, tmp_path
     monkeypatch.setattr(Experiment, "step", real_step)
     assert runner.main(argv(paper_file, out, "--resume")) == 0
     assert (out / "summary.json").read_bytes() == (whole / "summary.json").read_bytes()
+
+
+def test_a_contextual_checkpoint_round_trips_with_its_knowledge_per_context(tmp_path, paper_file):
+    """The contextual model's state (its per-context strengths, its split maps) and records (certainty per context)
+    pass the checkpoint's checks and load to the same predictions and knowledge."""
+    from aesop_torch.agent import AgentConfig
+    from sim.objects import load_objects
+    objects = load_objects(paper_file)
+    outcomes, probes = closed_form_outcomes(objects)
+    exp = Experiment([o.name for o in objects.train], [o.name for o in objects.probe], [[0, 1, 2]],
+                     config=AgentConfig.contextual(), outcomes=outcomes, probes=probes)
+    for _ in range(3):
+        exp.step(lambda name, b, t: outcomes[name])
+    run = {"objects": objects.canonical(), "seed": 0, "physics": "cached", "orders_arg": "listed",
+           "model": "contextual", "ablate": []}
+    ck.save_atomic({"run": run, "experiment": exp.state_dict()}, tmp_path / "ctx.pt")
+    again = load_experiment(tmp_path / "ctx.pt")
+    m = exp.probes["green_light_cylinder"]["measurement"]
+    assert again.config.model == "contextual" and torch.equal(again.predict(m), exp.predict(m))
+    assert torch.equal(again.agent.rules.strength, exp.agent.rules.strength)
+    assert again.knowledge_as_it_is()[0]["by_context"]["fate"]["dominant"] == ["weight"]

@@ -67,7 +67,7 @@ def _outcomes_problem(e: dict, jar) -> str | None:
 
 RECORD_KEYS = {"object", "predicted_cm3", "observed_cm3", "archimedes_cm3", "rules", "knowledge", "encoded",
                "goal_reached", "probe_rel_error", "perceived"}
-RECORD_OPTIONAL = {"true"}   # the file's values, for the logs
+RECORD_OPTIONAL = {"true", "certainty_by_context"}   # the file's values, for the logs; a contextual model's certainty
 TRUE_KEYS = {"extent_cm", "fill", "mass_g"}   # sim.objects.ObjectSpec.true_values
 # a prediction is a weighted average of recalled rewards (paper) or a fit over them (extended): beyond 100 jars of
 # water it is no reading of these objects
@@ -87,6 +87,7 @@ def _records_problem(e: dict, jar_cm3: float = math.inf) -> str | None:
     from aesop_torch.rules import PROPERTIES, RULE_NAMES, STATES
 
     names = e["train_names"]
+    properties = tuple(e["config"].get("encoder", {}).get("properties", PROPERTIES))
     for b, (order, records) in enumerate(zip(e["orders"], e["records"])):
         for i, rec in enumerate(records):
             where = f"order {b + 1}'s episode {i + 1}"
@@ -97,7 +98,7 @@ def _records_problem(e: dict, jar_cm3: float = math.inf) -> str | None:
                                                                             RECORD_OPTIONAL))
                 return (f"{where}'s record keys: missing {', '.join(missing) or 'none'}, unexpected "
                         f"{', '.join(map(_cut, extra)) or 'none'}")
-            if p := _record_problem(rec, jar_cm3, PROPERTIES, RULE_NAMES, STATES):
+            if p := _record_problem(rec, jar_cm3, properties, RULE_NAMES, STATES):
                 return f"{where}: {p}"
     return None
 
@@ -135,6 +136,11 @@ def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -
         return f"perceived: {p if _measurement_shape_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
     if "true" in rec and (p := _true_problem(rec["true"])):
         return p
+    by = rec.get("certainty_by_context", {})
+    if not isinstance(by, dict) or not all(
+            isinstance(c, dict) and set(c) == set(properties) and all(_number(x) and 0 <= x <= 1 for x in c.values())
+            for c in by.values()) or not set(by) <= {"floating", "sinking", "fate"}:
+        return "certainty_by_context is not a certainty in 0..1 per context (floating, sinking, fate) and property"
     return None
 
 
