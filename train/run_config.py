@@ -294,9 +294,10 @@ def check_same_run(args, objects, stored_run: dict) -> None:
             continue
         if not (args.out / RUN_NAME).is_file():
             v = stored_run[key]
-            ran = {"objects": "other objects (give them with --objects)", "orders_arg": f"--orders {v}",
-                   "seed": f"--seed {v}", "physics": f"--physics {v}", "model": f"--model {v}",
-                   "ablate": ("--ablate " + " --ablate ".join(v)) if v else "no --ablate"}.get(key, f"{key} {v}")
+            flag = {"orders_arg": "--orders", "seed": "--seed", "physics": "--physics", "model": "--model"}
+            ran = ("other objects (give them with --objects)" if key == "objects" else
+                   f"{flag[key]} {v}" if key in flag else
+                   " ".join(f"--ablate {p}" for p in v) or "no --ablate" if key == "ablate" else f"{key} {v}")
             raise UsageError(f"--resume: {args.out} holds no {RUN_NAME} (the run's settings), so the run's own flags "
                              f"must be given again: its checkpoint ran {ran}")
         raise UsageError(f"--resume: {key} differs from the interrupted run in {args.out}")
