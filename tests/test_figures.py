@@ -155,3 +155,27 @@ def test_a_model_with_contexts_draws_its_certainty_per_context():
     weight = [ln for ln in fate.lines if ln.get_label() == "weight"][0]
     assert list(weight.get_ydata()) == [0.0, 1.0]
     assert all(list(ln.get_ydata()) == [0.0, 0.0] for ln in fig.axes[2].lines)     # floating: nothing known
+
+
+def test_the_left_legend_says_which_line_is_which_order_and_property():
+    """Three orders: each property's three lines drawn with three dash patterns, the same pattern for an order in
+    every property, each line labelled with its property and order, and the legend naming the properties (colours)
+    and the orders (patterns); a banded panel names its line the median of its orders."""
+    runs = [[episode(), episode(color="dominant")], [episode(), episode()], [episode(size="irrelevant")] * 2]
+    left = figure2(runs).axes[0]
+    lines = curves(left)
+    assert len(lines) == 3 * len(PROPERTIES)
+    assert sorted(ln.get_label() for ln in lines) == sorted(f"{p}, order {b}" for p in PROPERTIES for b in (1, 2, 3))
+    dashes = lambda ln: (ln.get_linestyle(), ln._unscaled_dash_pattern)   # noqa: E731  '--' for every pattern else
+    style = {ln.get_label(): dashes(ln) for ln in lines}
+    for b in (1, 2, 3):   # one pattern per order, whatever the property
+        assert len({style[f"{p}, order {b}"] for p in PROPERTIES}) == 1
+    assert len({style[f"color, order {b}"] for b in (1, 2, 3)}) == 3
+    legend = left.get_legend()
+    names = [t.get_text() for t in legend.get_texts()]
+    assert {"order 1", "order 2", "order 3"} <= set(names) and set(PROPERTIES) <= set(names)
+    drawn = {t.get_text(): h for t, h in zip(legend.get_texts(), legend.legend_handles)}
+    for b in (1, 2, 3):   # the legend's pattern for an order is its lines'
+        assert dashes(drawn[f"order {b}"]) == style[f"color, order {b}"]
+    banded = figure2([[episode(), episode()]] * (MAX_CURVES + 1)).axes[0].get_legend()
+    assert f"median of {MAX_CURVES + 1} orders" in [t.get_text() for t in banded.get_texts()]

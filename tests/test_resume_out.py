@@ -61,6 +61,16 @@ def test_resume_alone_continues_the_run_bit_identical(tmp_path):
         before = ckpt.read_bytes()
         assert said in one_line(run("--resume", "--out", str(out), *other, timeout=120))
         assert ckpt.read_bytes() == before and not (out / "summary.json").exists()
+    # without run.json (a run from before it, or the file removed) the flags are the run's only account of itself:
+    # the refusal says the directory holds none and names the checkpoint's setting that differs, nothing changed
+    (out / "run.json").rename(tmp_path / "run.json")
+    before = ckpt.read_bytes()
+    line = one_line(run("--resume", "--out", str(out), timeout=120))
+    assert f"{out} holds no run.json" in line and "other objects" in line and "orders_arg" not in line, line
+    line = one_line(run("--resume", "--out", str(out), "--objects", args[1], timeout=120))
+    assert f"{out} holds no run.json" in line and "its checkpoint ran --seed 1" in line, line
+    assert ckpt.read_bytes() == before and not (out / "summary.json").exists()
+    (tmp_path / "run.json").rename(out / "run.json")
     # alone, or with flags that agree: continues to the uninterrupted run's summary
     r = run("--resume", "--out", str(out), "--seed", "1", "--orders", "1")
     assert r.returncode == 0, r.stderr

@@ -267,6 +267,7 @@ def config_refused(tmp_path, *args) -> str:
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert not out.exists()   # nothing written
+    assert r.stdout == ""     # refused before the first line: no "starting" for a run that never starts
     return lines[0]
 
 
@@ -375,3 +376,65 @@ def test_the_runners_tables_of_models_and_ablations_are_the_agents():
     import train.run as runner
     from aesop_torch.agent import ABLATIONS, MODELS
     assert runner.MODELS == MODELS and runner.ABLATIONS == ABLATIONS
+
+
+# -- what the other commands say, and the console commands ------------------------------------------------------------
+
+def test_ask_names_the_objects_file_it_refuses(tmp_path, capsys):
+    from train.ask import main
+    bad = tmp_path / "bad.json"
+    bad.write_text('{"train": [{"name": "x", "shape": "cube", "color": "red", "dims_cm": [5], "mass_g": 0}]}')
+    assert main([str(ROOT / "checkpoints" / "default.pt"), "--objects", str(bad)]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and err.startswith(f"train/ask.py: error: --objects {bad}: ") and "mass_g" in err, err
+    assert main([str(ROOT / "checkpoints" / "default.pt"), "--objects", str(tmp_path / "none.json")]) == 2
+    assert f"--objects {tmp_path / 'none.json'}: " in capsys.readouterr().err
+
+
+def test_a_task_runs_score_says_when_too_few_trials_can_pass():
+    """One-sided binomial test at chance 0.5: n of n correct gives p = 0.5 ** n, below 0.05 from n = 5 on; with 2
+    trials (p = 0.25 at best) or 4 (0.0625) no score passes, and the line says so instead of "fail"."""
+    from train.task_run import verdict
+    assert verdict(False, 2, 0.5) == verdict(False, 4, 0.5) == " (too few trials to pass at 0.05)"
+    assert verdict(False, 5, 0.5) == " -> fail" and verdict(True, 5, 0.5) == " -> pass"
+    assert verdict(False, 3, 1 / 3) == " -> fail"    # (1/3) ** 3 = 0.037: 3 of 3 would pass
+
+
+@pytest.mark.parametrize("command, words", [("run", "--objects FILE"), ("sweep", "sweep"), ("report", "dir"),
+                                            ("ask", "CHECKPOINT")])
+def test_each_console_command_answers_help_from_another_directory(tmp_path, monkeypatch, capsys, command, words):
+    """pyproject's [project.scripts] entry functions, called as the console command calls them, from a directory
+    that is not the repository."""
+    try:
+        import tomllib
+    except ModuleNotFoundError:   # Python 3.10
+        import tomli as tomllib
+
+    from aesop_torch import cli
+    scripts = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["scripts"]
+    assert scripts[f"aesop-{command}"] == f"aesop_torch.cli:{command}"
+    monkeypatch.chdir(tmp_path)
+    try:
+        code = getattr(cli, command)(["--help"])
+    except SystemExit as e:   # argparse's --help
+        code = e.code
+    out = capsys.readouterr().out
+    assert code == 0 and "usage" in out and words in out, out
+
+
+def test_the_console_command_puts_the_repository_on_the_path_itself(tmp_path):
+    """Loaded from its file in a fresh interpreter elsewhere, with nothing of the repository importable, aesop-run's
+    entry function finds train/ (the shared environment's install may point at another checkout)."""
+    code = ("import importlib.util, sys\n"
+            "spec = importlib.util.spec_from_file_location('cli', sys.argv[1])\n"
+            "cli = importlib.util.module_from_spec(spec)\n"
+            "spec.loader.exec_module(cli)\n"
+            "try:\n"
+            "    import train\n"
+            "    sys.exit('train importable before')\n"
+            "except ImportError:\n"
+            "    pass\n"
+            "cli.run(['--help'])\n")
+    r = subprocess.run([sys.executable, "-I", "-c", code, str(ROOT / "aesop_torch" / "cli.py")], cwd=tmp_path,
+                       capture_output=True, text=True, timeout=60)
+    assert r.returncode == 0 and "usage: train/run.py" in r.stdout, r.stderr

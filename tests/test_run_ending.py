@@ -197,3 +197,112 @@ def test_a_pool_whose_dead_process_the_pool_thread_saw_still_ends():
     finally:
         end_pool(pool)
     assert all(p.exitcode is not None for p in pool.processes)
+
+
+# -- a signal at any moment: one line and its exit code within seconds, never a hang -----------------------------------
+
+TRIALS = {"train": [GOOD, {**GOOD, "name": "blue", "color": "blue"}],
+          "trials": [{"stand": ["red_heavy_cylinder", "blue"]}, {"stand": ["blue", "red_heavy_cylinder"]}]}
+ENDS_WITHIN_S = 30   # after the signal: 0.1-0.2 s on a quiet machine; room for one loaded by other work
+
+
+def signalled(tmp_path, sig, anchor: str, delay: float, group: bool) -> tuple[subprocess.Popen, str, float]:
+    """The runner on a two-object file with two goal trials, sent `sig` `delay` s after the stdout line starting
+    with `anchor` (to its process group with `group`, as a terminal's Ctrl-C is); returns the ended process, its
+    stderr and the seconds from the signal to its end."""
+    f = tmp_path / "objects.json"
+    f.write_text(json.dumps(TRIALS))
+    p = subprocess.Popen([sys.executable, "-X", "faulthandler", RUN, "--objects", str(f), "--orders", "1", "--out",
+                          str(tmp_path / "out")],
+                         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, start_new_session=True,
+                         preexec_fn=lambda: [signal.signal(s, signal.SIG_DFL)
+                                             for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)])
+    try:
+        while not (line := p.stdout.readline()).startswith(anchor):
+            assert line, f"no line starting {anchor!r}: {p.communicate(timeout=60)[1]}"
+        time.sleep(delay)
+        (os.killpg if group else os.kill)(p.pid, sig)
+        sent = time.monotonic()
+        try:
+            _, err = p.communicate(timeout=ENDS_WITHIN_S)
+        except subprocess.TimeoutExpired:   # where it hangs: faulthandler's traceback of every thread
+            os.kill(p.pid, signal.SIGABRT)
+            pytest.fail(f"no end {ENDS_WITHIN_S} s after the signal: {p.communicate(timeout=30)[1][-3000:]}")
+        return p, err, time.monotonic() - sent
+    finally:
+        if p.poll() is None:   # it hung: end it, and its workers, so the test fails instead of waiting
+            os.killpg(p.pid, signal.SIGKILL)
+            p.communicate()
+
+
+@pytest.mark.parametrize("sig, anchor, delay, group", [
+    (signal.SIGTERM, "train/run.py: starting", 0.0, False),   # torch imported, the workers about to be forked
+    (signal.SIGHUP, "running:", 0.0, True),                    # the episodes
+    (signal.SIGTERM, "goal trials:", 0.0, False),              # inside the goal trials: their drops on the workers
+    (signal.SIGINT, "goal trials:", 0.15, True),
+    (signal.SIGTERM, "goal trials:", 0.3, True),
+    (signal.SIGTERM, "trial 1:", 0.0, False),                  # after the trials: Figure 2, the logs, the pools' end
+    (signal.SIGHUP, "trial 2:", 0.05, False),
+    (signal.SIGTERM, "trial 2:", 0.15, False),
+    (signal.SIGINT, "trial 2:", 0.3, True),
+])
+def test_a_signal_at_any_moment_ends_the_run_in_one_line_within_seconds(tmp_path, sig, anchor, delay, group):
+    p, err, took = signalled(tmp_path, sig, anchor, delay, group)
+    lines = err.strip().splitlines()
+    if p.returncode == 0:   # it had finished (summary.json written) before the signal came: nothing to say
+        assert anchor.startswith("trial ") or delay > 0, "a signal at its line cannot come after the end"
+        assert err == "" and (tmp_path / "out" / "summary.json").is_file(), err
+        return
+    by = "" if sig == signal.SIGINT else f" by {signal.Signals(sig).name}"
+    assert p.returncode == 128 + sig and len(lines) == 1 and f"interrupted{by}" in lines[0], (p.returncode, err)
+    assert took < ENDS_WITHIN_S
+
+
+def test_the_interrupted_line_says_resume_and_out_alone_suffice_and_they_do(tmp_path):
+    p, err, _ = signalled(tmp_path, signal.SIGTERM, "running:", 0.0, False)
+    out = tmp_path / "out"
+    assert p.returncode == 143 and err.strip().endswith(f"is intact: continue with --resume --out {out}"), err
+    r = subprocess.run([sys.executable, RUN, "--resume", "--out", str(out)], capture_output=True, text=True,
+                       timeout=180)
+    assert r.returncode == 0 and r.stderr == "", r.stderr
+    assert len(json.loads((out / "summary.json").read_text())["runs"][0]["trials"]) == 2
+
+
+def test_a_pool_dropped_with_a_killed_idle_process_does_not_hang_in_its_finaliser():
+    # the pool's finaliser (run when the pool is dropped, or at exit) waited for ever on the task queue's lock, which
+    # the killed idle process held: a runner ended by a signal while it ended its pools hung so after its one line
+    code = ("import gc, os, signal, time\n"
+            "from train.physics import quiet_pool\n"
+            "pool = quiet_pool(1, None)\n"
+            "pid = pool.apply_async(os.getpid).get(10)\n"
+            "time.sleep(0.2)\n"   # back at its wait for the next job, holding the task queue's lock
+            "os.kill(pid, signal.SIGKILL)\n"
+            "time.sleep(0.3)\n"
+            "del pool\n"
+            "gc.collect()\n"
+            "print('dropped')\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout == "dropped\n", r.stderr
+
+
+def test_signals_held_defers_a_signal_to_the_end_of_the_block_and_raises_it_once():
+    code = ("import os, signal\n"
+            "from train.endings import Ended, ending_signals, signals_held\n"
+            "with ending_signals():\n"
+            "    try:\n"
+            "        with signals_held():\n"
+            "            os.kill(os.getpid(), signal.SIGTERM)\n"
+            "            os.kill(os.getpid(), signal.SIGHUP)\n"
+            "            print('inside', flush=True)\n"
+            "    except Ended as e:\n"
+            "        print('raised', e.signum == signal.SIGTERM, flush=True)\n"
+            "    try:\n"
+            "        with signals_held():\n"
+            "            os.kill(os.getpid(), signal.SIGINT)\n"
+            "            print('inside', flush=True)\n"
+            "    except KeyboardInterrupt as e:\n"
+            "        print('raised', type(e).__name__, flush=True)\n"
+            "    print('after', flush=True)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout.split("\n") == ["inside", "raised True", "inside", "raised KeyboardInterrupt",
+                                                          "after", ""], (r.stdout, r.stderr)

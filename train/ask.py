@@ -29,6 +29,9 @@ USAGE = 'usage: python train/ask.py CHECKPOINT "words" (e.g. "light blue cube") 
 
 def main(argv=None) -> int:
     argv = sys.argv[1:] if argv is None else argv
+    if argv in (["-h"], ["--help"]):
+        print(USAGE + "\n\n" + __doc__.strip())
+        return 0
     by_file = len(argv) == 3 and argv[1] == "--objects"
     if not (by_file or len(argv) == 2) or argv[0].startswith("-"):
         print(USAGE, file=sys.stderr)
@@ -42,12 +45,16 @@ def main(argv=None) -> int:
         return 2
     try:
         objects = load_objects(argv[2]) if by_file else None
+    except ObjectsFileError as e:   # named as the runner names it: which file, then what is wrong
+        print(f"train/ask.py: error: --objects {argv[2]}: {e}", file=sys.stderr)
+        return 2
+    try:
         exp = load_experiment(path)
         if by_file:
             return _objects(exp, objects)
         words = argv[1]
         answer = exp.imagine(words)
-    except (CheckpointError, ObjectsFileError, ValueError) as e:
+    except (CheckpointError, ValueError) as e:
         print(f"train/ask.py: error: {e}", file=sys.stderr)
         return 2
     for i, o in enumerate(answer["orders"]):

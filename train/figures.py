@@ -36,6 +36,10 @@ PROPERTY_COLOURS = ("#1b9e77", "#d95f02", "#66a61e", "#e6ab02", "#7570b3", "#e72
 ERROR_CLIP = 1e-4        # errors below (a fraction: 0.01 %), exact zeros included, drawn there on the log axis
 BAND = (0.1, 0.9)        # a population's band: these quantiles over orders
 ERROR_BANDS = (BAND, (0.25, 0.75))   # the error's bands, wide then narrow: the spread and the middle half of orders
+# the left panel's line of each order (up to MAX_CURVES): the colour is the property's, the dashes the order's
+ORDER_DASHES = ("-", (0, (5, 2)), (0, (1, 1.5)), (0, (6, 2, 1, 2)), (0, (10, 3)), (0, (2, 3)), (0, (6, 2, 1, 2, 1, 2)),
+                (0, (1, 4)), (0, (12, 2, 3, 2)), (0, (4, 1, 1, 1)), (0, (8, 2, 1, 2, 1, 2, 1, 2)), (0, (3, 5)))
+assert len(ORDER_DASHES) >= MAX_CURVES
 assert len(STATE_LETTERS) == len(STATES) and len(PROPERTY_COLOURS) == len(OBJECT_PROPERTIES)
 
 
@@ -183,7 +187,8 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
         else:
             alpha = 0.9 if n_orders == 1 else max(0.3, 0.9 / np.sqrt(n_orders))
             for b in range(n_orders):
-                left.plot(x, cert[b, i], color=colour, linewidth=0.9, alpha=alpha)
+                left.plot(x, cert[b, i], color=colour, linewidth=0.9, alpha=alpha, linestyle=ORDER_DASHES[b],
+                          label=f"{props[i]}, order {b + 1}")
             _letters(left, x, cert[:, i], state[:, i], colour, min(1.0, alpha + 0.2))
     left.set_ylim(-0.06, 1.08)
     left.set_yticks(np.linspace(0, 1, 6))
@@ -195,13 +200,28 @@ def figure2(runs: list[list[dict]], floor: float | None = None, population: dict
         how = how.replace(f"of {n_orders} orders", f"of {first}") if banded else f"{first}, one line each"
     left.set_title(f"causal knowledge per property after each episode{chr(10) if population else ' '}({how})",
                    fontsize=9)
+    # which line is which: the colour names the property, the dashes the order (a banded panel: the median of all),
+    # the letter the state
     handles = []
     for p, colour in zip(props, colours):
         handles.append(Line2D([], [], color=colour, linewidth=2, label=p))
     for s, marker in zip(STATES, STATE_MARKERS):
         handles.append(Line2D([], [], color="black", marker=marker, markersize=7, linestyle="none",
                               label=s.replace("_", " ")))
-    left.legend(handles=handles, fontsize=7, ncol=4, loc="upper center", bbox_to_anchor=(0.5, -0.12),
+    if banded:
+        orders = [Line2D([], [], color="black", linewidth=1.6, label=f"median of {n_orders} orders")]
+    else:
+        orders = [Line2D([], [], color="black", linewidth=0.9, linestyle=ORDER_DASHES[b], label=f"order {b + 1}")
+                  for b in range(n_orders)]
+    ncol = max(len(props), len(STATES))   # the legend fills column by column: a property, a state, orders
+    rows = 2 + -(-len(orders) // ncol)
+    columns = []
+    for k in range(ncol):
+        column = handles[k:k + 1] if k < len(props) else []
+        column += handles[len(props) + k:len(props) + k + 1] if k < len(STATES) else []
+        column += orders[k::ncol]
+        columns += column + [Line2D([], [], linestyle="none", label="")] * (rows - len(column))
+    left.legend(handles=columns, fontsize=7, ncol=ncol, loc="upper center", bbox_to_anchor=(0.5, -0.12),
                 frameon=False)
 
     pct = 100 * err

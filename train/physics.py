@@ -29,7 +29,10 @@ whose runner dies (even by SIGKILL) is killed by the kernel (Linux: PR_SET_PDEAT
 
 A worker that dies (killed, out of memory) is not replaced: the job it held would never be answered, and the runner
 would wait for ever. Every wait on a pool's result looks at its processes every WATCH_S seconds and raises WorkerDied,
-naming the process, when one has died; `end_pool` ends a pool whatever state its dead processes left its locks in.
+naming the process, when one has died. A pool ends whatever state its dead processes left its locks in, however it
+ends (`end_pool`, or its finaliser when it is dropped or the interpreter exits): its processes are killed and its
+locks freed first. Starting and ending a pool hold Ctrl-C, SIGTERM and SIGHUP until they are done
+(train/endings.py signals_held): a pool cut off halfway would leave idle processes holding its task queue's lock.
 """
 
 from __future__ import annotations
@@ -43,6 +46,8 @@ import os
 import signal
 import sys
 import threading
+
+from train.endings import signals_held
 
 _WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
 START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
@@ -166,6 +171,15 @@ class QuietPool(multiprocessing.pool.Pool):
         super().__init__(*args, **kwargs)
         started.append(True)
 
+    @classmethod
+    def _terminate_pool(cls, taskqueue, inqueue, outqueue, pool, *rest):
+        """Pool's finaliser (terminate(), or the pool dropped, or the interpreter's exit), its processes killed and
+        its queues' locks freed first: Pool's own waits on the task queue's lock, which an idle process holds while
+        it waits for a job, for ever once that process was killed (a run ended by a signal while it ended its pool
+        hung so after its one line)."""
+        _kill_all(pool, inqueue, outqueue)
+        super()._terminate_pool(taskqueue, inqueue, outqueue, pool, *rest)
+
     def watch(self) -> None:
         """Raise WorkerDied if one of the pool's processes has died."""
         for p in self.processes:
@@ -216,35 +230,45 @@ def quiet_pool(processes: int, initializer, initargs: tuple = (), what: str = "a
     """A QuietPool started with SIGINT ignored, so its processes inherit that (Ctrl-C belongs to the runner); what:
     how WorkerDied names its processes."""
     main = threading.current_thread() is threading.main_thread()   # only it may set handlers
-    previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if main else None
-    try:
-        pool = QuietPool(processes, initializer=_start, initargs=(os.getpid(), initializer, initargs),
-                         context=mp.get_context(START_METHOD))
-    finally:
-        if main:
-            signal.signal(signal.SIGINT, previous)
-    pool.what, pool.processes = what, list(pool._pool)   # _pool loses the dead; this list keeps them for watch()
+    with signals_held() as held:   # a signal while the pool starts takes effect once it has started
+        # a forked process inherits the holding handler, which ignores Ctrl-C in it; else it starts with Ctrl-C
+        # ignored (a spawned one keeps only that across its exec)
+        ignore = main and not (START_METHOD == "fork" and signal.SIGINT in held)
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN) if ignore else None
+        try:
+            pool = QuietPool(processes, initializer=_start, initargs=(os.getpid(), initializer, initargs),
+                             context=mp.get_context(START_METHOD))
+        finally:
+            if ignore:
+                signal.signal(signal.SIGINT, previous)
+        pool.what, pool.processes = what, list(pool._pool)   # _pool loses the dead; this list keeps them for watch()
     return pool
+
+
+def _kill_all(processes, inqueue, outqueue) -> None:
+    """Kill a pool's processes and free its queues' locks, which a killed process may have held (an idle worker
+    holds the task queue's while it waits): with every process dead, nothing else takes them."""
+    for p in processes:
+        if p.exitcode is None:
+            p.kill()
+    for p in processes:
+        p.join()
+    for lock in (getattr(inqueue, "_rlock", None), getattr(outqueue, "_wlock", None)):
+        if lock is not None:
+            lock.acquire(False)   # held by a dead process or by this call: free either way
+            lock.release()
 
 
 def end_pool(pool) -> None:
     """End a quiet_pool (None: nothing). Every result the caller wants is in (or the run is ending): its processes
-    need no orderly shutdown (0.4 s) and are killed. A process killed while it held one of the pool's queue locks
-    (an idle worker holds the task queue's while it waits) would leave Pool.terminate waiting for ever: with every
-    process dead, the locks are freed first."""
+    need no orderly shutdown (0.4 s) and are killed, its locks freed (_kill_all), then Pool.terminate. A signal
+    meanwhile takes effect once the pool has ended (signals_held)."""
     if pool is None:
         return
-    for p in getattr(pool, "processes", pool._pool):
-        if p.exitcode is None:
-            p.kill()
-    for p in getattr(pool, "processes", pool._pool):
-        p.join()
-    for lock in (pool._inqueue._rlock, getattr(pool._outqueue, "_wlock", None)):
-        if lock is not None:
-            lock.acquire(False)   # held by a dead process or by this call: free either way
-            lock.release()
-    pool.terminate()
-    pool.join()
+    with signals_held():
+        _kill_all(getattr(pool, "processes", pool._pool), pool._inqueue, pool._outqueue)
+        pool.terminate()
+        pool.join()
 
 
 class Physics:

@@ -47,7 +47,7 @@ FORMAT = 3               # in every cell's hash: bumped when the rows a spec giv
                          # stored, recalled, probe_errors, probe_floors; 3: config)
 BATCH_MAX_TRAIN = 500    # the batch answer compares every pair of a set's train objects: up to this many
 WORLDS = ("closed_form", "closed_form_exact", "physics")
-from train.run import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables and rules, without torch
+from train.run_config import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables, torch-free
 MAX_CELLS = 1_000_000
 MAX_SEEDS = 1_000_000    # seeds of one range
 MAX_ORDERS = 100_000     # orders of one cell (one batched agent)

@@ -21,6 +21,7 @@ import time
 from pathlib import Path
 
 REWARD_TRIALS_TAG = "battery"
+PASS_P = 0.05   # train/battery.py Score.passed: p below it passes (said in the verdict)
 
 
 def is_task_file(path) -> bool:
@@ -170,9 +171,21 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
                "seconds": round(time.time() - t0, 1)}
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     for k, s in scores.items():
-        log(f"  {k}: {s['correct']}/{s['n']} correct ({s['percent']:.0f} %), p = {s['p']:.3g} -> "
-            f"{'pass' if s['passed'] else 'fail'}")
+        log(f"  {k}: {s['correct']}/{s['n']} correct ({s['percent']:.0f} %), p = {s['p']:.3g}"
+            + verdict(s["passed"], s["n"], result["chance"]))
     return summary
+
+
+def verdict(passed: bool, n: int, chance: float) -> str:
+    """What a score's p-value says: " -> pass", " -> fail", or, when even n correct of n would not pass (2 trials at
+    chance 0.5 give p = 0.25 at best), that the test cannot pass on so few trials: not a failure of the agents."""
+    from train.battery import Score
+
+    if passed:
+        return " -> pass"
+    if not Score(n, n, chance).passed:
+        return f" (too few trials to pass at {PASS_P:g})"
+    return " -> fail"
 
 
 def _tensorboard(logdir: Path, result: dict, options: list) -> None:

@@ -1,0 +1,53 @@
+"""The console commands of pyproject's [project.scripts]: aesop-run, aesop-sweep, aesop-report and aesop-ask, the
+same as `python train/run.py`, `python train/sweep.py`, `python -m train.report` and `python train/ask.py`, from any
+directory.
+
+train/ and sim/ are the repository's folders, not installed packages (pyproject.toml says why): each command puts
+the repository root (the folder that holds this package, as `pip install -e .` leaves it) on sys.path and calls the
+script's main. Self-contained (no relative import), so that it can be loaded from its file.
+"""
+
+from __future__ import annotations
+
+import importlib
+import sys
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _main(command: str, module: str):
+    """module's main, the repository root put first on sys.path; exit code 2 and one line when this package is not
+    in its repository (installed without -e: train/ is not beside it)."""
+    if not (ROOT / "train" / "__init__.py").is_file():
+        print(f"{command}: error: {ROOT} holds no train/: the console commands run from the repository (install it "
+              f"with `pip install -e .` there)", file=sys.stderr)
+        raise SystemExit(2)
+    if str(ROOT) not in sys.path:
+        sys.path.insert(0, str(ROOT))
+    return importlib.import_module(module).main
+
+
+def run(argv=None) -> int:
+    """aesop-run: train/run.py. As the console command (argv None) it ends as the script does, sparing the
+    interpreter's teardown (train/endings.py exit_now)."""
+    code = _main("aesop-run", "train.run")(argv)
+    if argv is None:
+        from train.endings import exit_now
+        exit_now(code)
+    return code
+
+
+def sweep(argv=None) -> int:
+    """aesop-sweep: train/sweep.py."""
+    return _main("aesop-sweep", "train.sweep")(argv)
+
+
+def report(argv=None) -> int:
+    """aesop-report: python -m train.report."""
+    return _main("aesop-report", "train.report")(argv)
+
+
+def ask(argv=None) -> int:
+    """aesop-ask: train/ask.py."""
+    return _main("aesop-ask", "train.ask")(argv)
