@@ -147,7 +147,6 @@ class ContextualRules(nn.Module):
         return fired
 
     def _fire(self, s, delta_p, delta_c, compared, bottom_up) -> torch.Tensor:
-        c = self.config
         live = s > self.retro_floor
         dp = delta_p & compared[:, None] & live
         dc = (delta_c & compared)[:, None]
