@@ -184,8 +184,8 @@ def main(argv=None) -> None:
                                                                            "(without --record)")
     record_flag(ap)
     a = ap.parse_args(argv)
-    if a.quick and a.record:
-        ap.exit(2, "battery: --quick is a smoke test, not recorded (drop --record)\n")
+    if a.record and (a.quick or a.trials != 20):
+        ap.exit(2, "battery: --quick and --trials are for smoke tests, not recorded (drop --record)\n")
     from aesop_torch.agent_config import MODELS
     bad = [m for m in a.models if m not in MODELS]
     if bad:
@@ -256,7 +256,11 @@ def main(argv=None) -> None:
     curves = {t: {label(m, ab, k): (merged[(m, ab, k, t)]["right"], merged[(m, ab, k, t)]["chance"])
                   for m, ab, k in conds} for t in tasks}
     curves_png(curves, list(tasks), png)
-    print(f"learning curves: {png.relative_to(ROOT) if png == PNG else png}; {time.perf_counter() - t0:.0f} s")
+    import resource
+    cpu = sum(getattr(resource.getrusage(w), f) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
+              for f in ("ru_utime", "ru_stime"))
+    print(f"learning curves: {png.relative_to(ROOT) if png == PNG else png}; {time.perf_counter() - t0:.0f} s "
+          f"({cpu:.0f} s of CPU over all processes)")
 
     M = a.models[0]
 

@@ -54,8 +54,10 @@ KINDS = ("naive", "experienced")
 @dataclass(frozen=True)
 class Protocol:
     # the softmax's temperature in the value's unit (0.1 mm of the reward's rise): 3 (0.3 mm) makes a predicted
-    # difference of 1 mm a 97 % choice and one of 0.1 mm a coin flip; chosen on seeds 1000-1001 (benches/battery.py
-    # --first-seed 1000), never on the bench seeds
+    # difference of 1 mm a 97 % choice and one of 0.1 mm a coin flip. Of 1, 3, 10, 30, 100 the smallest (the most
+    # decisive chooser) at which naive subjects stay within 10 points of chance on trial 1 of the apparatus tasks
+    # they know nothing of (all but high vs low, which the gap decides), both models, seeds 1000-1001 x 3 subjects
+    # (at 1 the paper model's were at 29 %); never chosen on the bench's seeds
     temperature: float = 3.0
     pretrain_repeats: int = 2        # each pre-training stone dropped this many times
     jar_objects: int = 64            # the experienced subjects' jar life (generated objects)
