@@ -104,6 +104,10 @@ def test_positions_are_counterbalanced():
     assert [sum(s) for s in r["swapped"]] == [5, 5]
     assert len({tuple(s) for s in r["swapped"]}) == 2                 # each subject its own order
     assert all(any(s) and not all(s) for s in r["swapped"])
+    # each task its own draws: the same subjects mirror another task on other trials
+    other = run_task(load_task(TASKS / "water_vs_sawdust.json"), "paper", [2], 2, trials=10, kind="naive",
+                     protocol=SMALL)
+    assert other["swapped"] != r["swapped"]
 
 
 def test_softmax_choice_draws_by_the_values():

@@ -322,7 +322,8 @@ def play(subjects: Subjects, task_name: str, options: list, world, correct: set,
         raise ValueError(f"aim must be one of {AIMS}, got {aim!r}")
     agent = subjects.agent
     B, n = agent.batch, len(options[0])
-    rngs = [random.Random(x * 104729 + 17) for x in subjects.seeds]
+    # each subject's generator for this task: its positions and choices in one task tell nothing of another's
+    rngs = [random.Random(f"{x}:{task_name}") for x in subjects.seeds]
     swaps = [balanced_swaps(trials, r) for r in rngs]
     right = [[] for _ in range(B)]
     chosen_all = [[] for _ in range(B)]
