@@ -223,8 +223,9 @@ def main(argv=None) -> None:
                                          peeks=sum(done[(m, ab, k, s)][t]["peeks"] for s in seeds),
                                          options=first["options"], correct=first["correct"])
     n_subj = a.seeds * a.subjects
-    print(f"Aesop battery: {a.seeds} seeds x {a.subjects} subjects = {n_subj} subjects per model and kind, {a.trials} trials "
-          f"each, a softmax over (predicted rise - the reward's gap){'' if a.aim == 'gap' else ' (--aim rise: rise alone)'}, "
+    aim = "" if a.aim == "gap" else " (--aim rise: rise alone)"
+    print(f"Aesop battery: {a.seeds} seeds x {a.subjects} subjects = {n_subj} subjects per model and kind, "
+          f"{a.trials} trials each, a softmax over (predicted rise - the reward's gap){aim}, "
           f"positions counterbalanced; experienced: a jar life of {a.jar_objects} objects first")
     print("t1: % right on trial 1 [95 % Wilson]; slope: per trial, logit with an intercept per subject [95 %] (sep.: "
           "perfect separation, exact p; n.e.: all alike); pass: subjects passing their own binomial test; "

@@ -83,7 +83,7 @@ def test_right_after_right_against_right_after_wrong():
     a = after_outcome([[True, True, False, True], [False, False, True, True]])
     assert (a["n_after_right"], a["n_after_wrong"]) == (3, 3)
     assert a["after_right"] == pytest.approx(2 / 3) and a["after_wrong"] == pytest.approx(2 / 3)
-    # Fisher's one-sided p for [[2, 1], [2, 1]]: P(X >= 2) with X ~ hypergeom(6, 4, 3) = (C(4,2)C(2,1) + C(4,3)) / C(6,3)
+    # Fisher's one-sided p for [[2, 1], [2, 1]]: P(X >= 2), X ~ hypergeom(6, 4, 3): (C(4,2)C(2,1) + C(4,3)) / C(6,3)
     assert a["p"] == pytest.approx((6 * 2 + 4) / 20)
 
 
