@@ -193,6 +193,18 @@ def test_bench_help():
     assert r.returncode == 0 and "--ablate" in r.stdout and "--record" in r.stdout and "--models" in r.stdout
 
 
+def bench_model() -> str:
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("battery_bench", ROOT / "benches" / "battery.py")
+    sys.path.insert(0, str(ROOT / "benches"))
+    try:
+        module = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(module)
+    finally:
+        sys.path.remove(str(ROOT / "benches"))
+    return module.MODEL
+
+
 @pytest.mark.timeout(200)
 def test_bench_last_line_on_a_tiny_run(tmp_path):
     """1 seed, 1 subject, 3 trials, one task: ~9 s of CPU (8.2 s user measured)."""
@@ -202,8 +214,9 @@ def test_bench_last_line_on_a_tiny_run(tmp_path):
     assert r.returncode == 0, r.stderr
     last = r.stdout.splitlines()[-1]
     rate = r"(0\.\d\d|1\.00)"
-    assert re.fullmatch(rf"transfer_trial1_extended={rate} transfer_trial1_extended_rules_off={rate} "
-                        r"transfer_trial1_paper=n/a learned_tasks_naive_extended=[01]/1 crows_agreement=[01]/1",
+    m = bench_model()   # the transfer model, one constant in the bench
+    assert re.fullmatch(rf"transfer_trial1_{m}={rate} transfer_trial1_{m}_rules_off={rate} "
+                        rf"transfer_trial1_paper=n/a learned_tasks_naive_{m}=[01]/1 crows_agreement=[01]/1",
                         last), last
     assert (tmp_path / "battery_curves.png").stat().st_size > 0
     assert "before trial 1: 0" in r.stdout
