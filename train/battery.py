@@ -1,27 +1,41 @@
-"""The Aesop battery scored as the animal studies score it: per task, agents choose among (tube, object) options over
-20 trials, learning from each outcome; choices on trial 1, trials 1-5 and 1-20 against chance with an exact
-one-sided binomial test (p < 0.05 = pass; chance = 1 / number of options).
+"""The Aesop battery as the animal studies run it: a subject meets the test apparatus and the test objects for the
+first time on trial 1, chooses among (tube, object) options on each trial, learns from each outcome, and its choices
+are analysed as the studies analyse theirs.
 
-The agent perceives the apparatus as it perceives an object: each option's tube enters the measurement as context
-properties (EncoderConfig.context, each a SOM map of its own), so its episodes hold the substrate's look, the
-tube's width, its level and its place, recall is cued by them as by the object's own properties, and the same four
-rules judge them by the same comparisons (AgentConfig.properties), their pathway strengths gating recall as the
-object's do. Nothing here tells the agent which option works: it predicts each option's outcome by recall, chooses
-the largest, acts (the closed form `sim.apparatus.outcome` is the world), observes the rise of the reward tube and
-learns (Agent.step).
+The protocol (run_task):
+- Pre-training, as the studies' subjects had it: stones of a few sizes (sinking objects, none of them a test
+  object) dropped into a single tube of water with a floating reward (a jar-like tube, not the test apparatus),
+  learning from each drop (Agent.step). Nothing else comes before trial 1: no subject drops anything into the test
+  apparatus, nor handles a test object, before it (`Subjects.log` records every episode and its phase).
+- Two kinds of subject: naive (pre-training only) and experienced (a jar life first: `jar_objects` generated objects
+  dropped into a jar, the Crow and Pitcher experiment itself with closed-form outcomes, then the pre-training).
+- Each trial: per option, the agent predicts the reward's rise by recall (Agent.predict) and values the option by
+  what that rise does for the reward it raises: the predicted rise less the reward's gap (how far below reach it is
+  seen). The choice is a softmax over the values at `Protocol.temperature`. Then it acts (the closed form
+  `sim.apparatus.outcome` is the world), observes the reward's rise and learns (Agent.step).
+- Tube and object positions are counterbalanced: on half the trials of each subject, in an order drawn from its own
+  generator, the apparatus is mirrored (left and right swapped); each tube's place is a context property the agent
+  perceives (EncoderConfig.context), so the correct side is not fixed.
+
+The apparatus enters each episode as context properties (the substrate's look, the tube's width, its level and
+place), each on a SOM map of its own; the rules judge them with the object's properties (AgentConfig.properties).
+
+The analysis (analyse): per task and kind, trial-1 performance with its 95 % interval, a learning slope from a
+logistic model of correct choice on trial number with a per-subject intercept (Ghirlanda & Lind 2017), each subject's
+exact binomial test, and P(correct | previous correct) vs P(correct | previous wrong) (Hennefield et al. 2018).
 """
 
 from __future__ import annotations
 
 import math
 import random
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import torch
 
 from aesop_torch.agent import Agent
 from aesop_torch.agent_config import AgentConfig
-from aesop_torch.encoders import EncoderConfig, train_property_maps
+from aesop_torch.encoders import train_property_maps
 from aesop_torch.hub import ObjectHub
 
 # the apparatus as the agent perceives it, each a value in 0..1 on a map of its own
@@ -29,12 +43,46 @@ CONTEXT = ("surface", "width", "level", "place")
 # the look of a tube's contents (how bright and grainy it is): a perceived value, not what it does
 SURFACE_LOOK = {"water": 0.15, "sand": 0.6, "sawdust": 0.85}
 WIDTH_RANGE_CM = (1.0, 30.0)      # as the size map's range: tubes from a finger's width to a bucket's
-REWARD_SCALE = 10.0               # the reward tube's rise in mm as the reward the memory stores (its code is log-scaled
-                                  # from 0.5, so a rise of 0.05 cm is the smallest that registers)
+# the reward's rise in cm -> the reward the memory stores, in units of 0.1 mm: the reward code is log-scaled from 0.5,
+# so a rise of 0.05 mm registers, and a test tube's 18 mm (180) and a jar's 0.4 mm (4) are both well inside its range
+REWARD_SCALE = 100.0
 TRIALS = 20
 AIMS = ("gap", "rise")   # what a choice aims at (play's aim)
+KINDS = ("naive", "experienced")
 
 
+@dataclass(frozen=True)
+class Protocol:
+    # the softmax's temperature in the value's unit (0.1 mm of the reward's rise): 3 (0.3 mm) makes a predicted
+    # difference of 1 mm a 97 % choice and one of 0.1 mm a coin flip. Of 1, 3, 10, 30, 100 the smallest (the most
+    # decisive chooser) at which naive subjects stay within 10 points of chance on trial 1 of the apparatus tasks
+    # they know nothing of (all but high vs low, which the gap decides), both models, seeds 1000-1001 x 3 subjects
+    # (at 1 the paper model's were at 29 %); never chosen on the bench's seeds
+    temperature: float = 3.0
+    pretrain_repeats: int = 2        # each pre-training stone dropped this many times
+    jar_objects: int = 64            # the experienced subjects' jar life (generated objects)
+    # 20 trials per task: the crows' count in each of Jelbert et al. 2014's experiments; the other studies' counts
+    # were not checked here, and 20 is kept for every task
+    trials: int = TRIALS
+
+
+# Pre-training (the studies': stones dropped into a single tube of water): three stones of a few sizes, rough grey-
+# brown like stones, none of them a test object, into one tube wider than any test tube, the reward near reach
+PRETRAIN_TUBE = dict(name="pretraining_tube", substrate="water", inner_diameter_cm=6.0, height_cm=20.0, level_cm=16.5,
+                     reward=True)
+PRETRAIN_STONES = (("pebble_small", "sphere", (2.0,), 11.0), ("pebble_medium", "sphere", (2.6,), 24.0),
+                   ("pebble_large", "sphere", (3.2,), 45.0))
+STONE_RGB = (0.45, 0.40, 0.35)
+
+
+def pretraining_task():
+    """The pre-training apparatus: one jar-like tube of water, the reward floating 0.5 cm below reach, and stones."""
+    from sim.apparatus import TaskObject, Task, Tube
+    stones = tuple(TaskObject(n, shape, dims, mass, STONE_RGB) for n, shape, dims, mass in PRETRAIN_STONES)
+    return Task("pretraining", (Tube(**PRETRAIN_TUBE),), stones)
+
+
+# -- the studies' binomial scoring ---------------------------------------------------------------------------------
 def binomial_tail(k: int, n: int, p: float) -> float:
     """P(X >= k) for X ~ Binomial(n, p): the one-sided exact test of k correct choices out of n at chance p."""
     if not 0 <= k <= n or not 0 < p < 1:
@@ -62,22 +110,23 @@ class Score:
 
 
 def score(correct: list[list[bool]], chance: float) -> dict:
-    """Per-agent trial-by-trial correctness -> {"trial 1", "1-5", "1-20"}: pooled Scores over agents (as the studies
-    pool a subject's trials; here every agent is a subject)."""
+    """Per-subject trial-by-trial correctness -> {"trial 1", "1-5", "1-20"}: Scores pooled over subjects (a summary
+    only: a subject's trials are not independent, `analyse` is the analysis)."""
     out = {}
     for label, upto in (("trial 1", 1), ("1-5", 5), ("1-20", TRIALS)):
         out[label] = Score(sum(sum(c[:upto]) for c in correct), sum(len(c[:upto]) for c in correct), chance)
     return out
 
 
+# -- agents ----------------------------------------------------------------------------------------------------------
 _MAPS: dict = {}
 
 
 def context_agent(config: AgentConfig, batch: int) -> Agent:
     """An agent whose maps include the context maps of config.encoder.context (their hub branches too), and whose
     rules judge them with the object's properties (AgentConfig.properties). The maps are developed as the Agent
-    develops them (from config.encoder, same seed: the property maps are bit-identical, the context maps' draws come
-    after theirs), once per seed, and shared between agents of the same seed: maps never change after development."""
+    develops them (from config.encoder, same seed), once per seed, and shared between agents of the same seed: maps
+    never change after development."""
     if not config.encoder.context:
         return Agent(config, batch=batch)
     agent = Agent(config, batch=batch, develop=False)
@@ -91,8 +140,8 @@ def context_agent(config: AgentConfig, batch: int) -> Agent:
 
 
 def make_config(model: str, ablate: tuple = (), seed: int = 0, extra: int = 64) -> AgentConfig:
-    c = AgentConfig()
-    c = replace(c, model=model, ablate=tuple(ablate), seed=seed, encoder=replace(c.encoder, context=CONTEXT))
+    c = AgentConfig.named(model, ablate=tuple(ablate), seed=seed)
+    c = replace(c, encoder=replace(c.encoder, context=CONTEXT))
     c.memory.max_episodes += extra
     c.hub.max_assemblies += extra
     return c
@@ -106,52 +155,10 @@ def stack(ms: list[dict]) -> dict:
     return out
 
 
-def play(agent: Agent, options: list[dict], world, correct: set, explore: list[list[int]], trials: int = TRIALS,
-         seed: int = 0, offered: int | None = None, aim: str = "gap") -> tuple[list[list[bool]], list[list[int]]]:
-    """The agent's B agents explore, then play `trials` trials, learning all the while.
-
-    options: per option its measurement (an object's, with "context"). world(i) -> (rise_cm, reached) of option i
-    from the trial's starting state. correct: the options that count as correct. explore: per agent the options it
-    tries first, in order (the same length for all). offered: the first `offered` options are the trials'
-    choices (default all; the rest are exploration's only). aim: "gap" (default) chooses the option whose predicted
-    rise leaves its reward the least short of reach (an option's "gap_cm": how far below reach the reward it raises
-    is seen, as the runner's goal trials aim at the ball's gap); "rise" the largest predicted rise, the gap unseen.
-    With equal gaps the two choose alike. Returns (per agent per trial correct, per agent choices)."""
-    if aim not in AIMS:
-        raise ValueError(f"aim must be one of {AIMS}, got {aim!r}")
-    B = agent.batch
-    rng = random.Random(seed)
-    offered = len(options) if offered is None else offered
-
-    def act(chosen: list[int]) -> None:
-        outs = [world(i) for i in chosen]
-        observed = torch.tensor([max(REWARD_SCALE * r, 0.0) for r, _ in outs])
-        reached = torch.tensor([bool(x) for _, x in outs])
-        agent.step(stack([options[i] for i in chosen]), observed, torch.zeros(B, dtype=torch.bool), reached)
-
-    for step in range(len(explore[0]) if explore else 0):
-        act([explore[b][step] for b in range(B)])
-    right = [[] for _ in range(B)]
-    chosen_all = [[] for _ in range(B)]
-    gaps = [options[i].get("gap_cm", 0.0) if aim == "gap" else 0.0 for i in range(offered)]
-    # the predicted margin over the closest gap, in the stored reward's unit: exactly the predicted rise when the
-    # gaps are equal (no rounding), so only a difference in what is seen of the rewards changes the choice
-    shortfall = torch.tensor([REWARD_SCALE * (g - min(gaps)) if g != min(gaps) else 0.0 for g in gaps])
-    for _ in range(trials):
-        expected = torch.stack([agent.predict(stack([options[i]] * B)) for i in range(offered)], 1)   # (B, offered)
-        expected = expected - shortfall
-        chosen = []
-        for b in range(B):
-            e = expected[b].tolist()
-            known = [i for i, x in enumerate(e) if not math.isnan(x)]
-            best = max((e[i] for i in known), default=None)
-            ties = [i for i in known if e[i] == best] or list(range(offered))
-            chosen.append(rng.choice(ties))
-        for b, i in enumerate(chosen):
-            right[b].append(i in correct)
-            chosen_all[b].append(i)
-        act(chosen)
-    return right, chosen_all
+def width_code(diameter_cm: float) -> float:
+    lo, hi = WIDTH_RANGE_CM
+    d = min(max(diameter_cm, lo), hi)
+    return (math.log(d) - math.log(lo)) / (math.log(hi) - math.log(lo))
 
 
 # -- the apparatus tasks (sim/apparatus.py) ------------------------------------------------------------------------
@@ -163,66 +170,316 @@ def reward_gap_cm(task, tube, levels: dict) -> float:
 
 
 def perceived(task, tube, obj) -> dict:
-    """A (tube, object) option as the agent perceives it: the object's measurement, the tube's context and the gap
-    of the reward it raises (reward_gap_cm, for the choice)."""
+    """A (tube, object) option as the agent perceives it: the object's measurement, the tube's context (its place:
+    its position in task.tubes, left 0 to right 1) and the gap of the reward it raises (reward_gap_cm)."""
     m = dict(obj.exact_measurement())
     m["gap_cm"] = reward_gap_cm(task, tube, task.start_levels())
     names = [t.name for t in task.tubes]
-    lo, hi = WIDTH_RANGE_CM
-    d = min(max(tube.inner_diameter_cm, lo), hi)
-    m["context"] = {"surface": SURFACE_LOOK[tube.substrate],
-                    "width": (math.log(d) - math.log(lo)) / (math.log(hi) - math.log(lo)),
+    m["context"] = {"surface": SURFACE_LOOK[tube.substrate], "width": width_code(tube.inner_diameter_cm),
                     "level": min(max(tube.level_cm / tube.height_cm, 0.0), 1.0),
                     "place": names.index(tube.name) / max(len(names) - 1, 1)}
     return m
 
 
+def mirrored(task):
+    """The apparatus with left and right swapped: its tubes (and the objects offered) in the reverse order."""
+    return replace(task, tubes=tuple(reversed(task.tubes)), objects=tuple(reversed(task.objects)))
+
+
 def task_world(task, outcome=None, perceive=None):
-    """(options, world(i), correct) of a task: every option from the task's starting levels (each trial is set up
-    afresh, as in the studies), correct = the options that bring the reward in reach (else those that raise it most)."""
+    """(options, world(i), correct, opts) of a task: every option from the task's starting levels (each trial is
+    set up afresh, as in the studies), correct = the options that bring the reward in reach (else those that raise it
+    most). options[layout][i]: option i as perceived with the apparatus as it stands (layout 0) or mirrored (1); i
+    indexes task.options() in either layout."""
     if outcome is None:
         from sim.apparatus import outcome
     opts = list(task.options())
-    levels = {t.name: t.level_cm for t in task.tubes}
+    levels = task.start_levels()
     outs = [outcome(task, dict(levels), tube, obj) for tube, obj in opts]
     rises = [float(o["reward_rise_cm"]) for o in outs]
     reached = [bool(o["reached"]) for o in outs]
     named = set(map(tuple, getattr(task, "correct", ()) or ()))
     correct = ({i for i, (t, o) in enumerate(opts) if (t.name, o.name) in named} or
                {i for i, r in enumerate(reached) if r} or {i for i, r in enumerate(rises) if r == max(rises)})
-    options = [(perceive or perceived)(task, tube, obj) for tube, obj in opts]
+    look = perceive or perceived
+    mirror = mirrored(task)
+    by_name = {(t.name, o.name): (t, o) for t, o in mirror.options()}
+    options = [[look(task, t, o) for t, o in opts],
+               [look(mirror, *by_name[(t.name, o.name)]) for t, o in opts]]
     return options, (lambda i: (rises[i], reached[i])), correct, opts
 
 
-def run_task(task, model: str, seeds: list[int], orders: int, ablate: tuple = (), trials: int = TRIALS,
-             outcome=None, perceive=None, aim: str = "gap") -> dict:
-    """Agents over seeds x orders on one task. Exploration: the task file's train objects dropped into every open tube,
-    in a random order per agent (as the runner explores its train objects), then the trials. outcome: the world
-    (default sim.apparatus.outcome); perceive(task, tube, obj): an option's measurement (default `perceived`, from
-    the task file; train/task_run.py's, from the camera); aim: what a choice aims at (play)."""
-    if outcome is None:
-        from sim.apparatus import outcome
+def balanced_swaps(n: int, rng: random.Random) -> list[bool]:
+    """n trials, half of them (n // 2, the odd one drawn) mirrored, in a random order: both positions equally often."""
+    swaps = [True] * (n // 2) + [False] * (n // 2) + ([rng.random() < 0.5] if n % 2 else [])
+    rng.shuffle(swaps)
+    return swaps
+
+
+def softmax_choice(values: list[float], temperature: float, rng: random.Random) -> int:
+    """One draw from a softmax over values (NaN: nothing recalled, valued as the mean of the known ones; all NaN:
+    uniform)."""
+    known = [v for v in values if not math.isnan(v)]
+    fill = sum(known) / len(known) if known else 0.0
+    v = [fill if math.isnan(x) else x for x in values]
+    top = max(v)
+    w = [math.exp((x - top) / temperature) for x in v]
+    r = rng.random() * sum(w)
+    for i, x in enumerate(w):
+        r -= x
+        if r < 0:
+            return i
+    return len(w) - 1
+
+
+# -- subjects ------------------------------------------------------------------------------------------------------
+@dataclass
+class Subjects:
+    """B subjects of one model (one agent batch; they share the maps developed from `seed`, each has its own seed
+    for its jar life, its positions and its choices). log[b]: every episode of subject b as (phase, apparatus,
+    object), phase "jar" (the jar life), "pretraining" or "trial"."""
+    agent: Agent
+    seeds: list[int]
+    kind: str
+    log: list[list[tuple]] = field(default_factory=list)
+
+    def select(self) -> "Subjects":
+        """A copy whose agents learn on without changing these (each task starts from the same subjects)."""
+        return Subjects(self.agent.select(list(range(self.agent.batch))), list(self.seeds), self.kind,
+                        [list(x) for x in self.log])
+
+
+def jar_world(seed: int, n: int):
+    """A jar life of n generated objects (sim.make_objects.generate, a set of pairs, with the simulated robot's
+    sensor noise; closed-form outcomes as benches/ablation.py's world): per object its measurement with the jar's
+    context, the ball's rise (the stored reward), whether it came in reach, whether the object sank, its name."""
+    from sim.make_objects import generate
+    from sim.objects import parse_objects
+    from sim.sensor_model import SensorModel
+    from train.experiment import closed_form_outcomes
+    objs = parse_objects(generate(seed, n, 0, pairs=True))
+    outcomes, _ = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
+    jar = objs.jar
+    ctx = {"surface": SURFACE_LOOK["water"], "width": width_code(jar.inner_diameter_cm),
+           "level": min(max(jar.water_depth_cm / jar.height_cm, 0.0), 1.0), "place": 0.0}
+    out = []
+    for o in objs.train:
+        r = outcomes[o.name]
+        out.append((dict(r["measurement"], context=ctx), REWARD_SCALE * r["observed_cm3"] / jar.area_cm2,
+                    bool(r["goal_after"]), bool(r["sank"]), o.name))
+    return out
+
+
+def make_subjects(model: str, kind: str, seed: int, subjects: int, ablate: tuple = (),
+                  protocol: Protocol = Protocol()) -> Subjects:
+    """B = `subjects` subjects of `kind` before their first task: maps developed from `seed`; subject b's own seed
+    is seed * 1000 + b. Experienced subjects live a jar life first; both kinds then have the pre-training."""
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {KINDS}, got {kind!r}")
+    seeds = [seed * 1000 + b for b in range(subjects)]
+    n_pre = len(PRETRAIN_STONES) * protocol.pretrain_repeats
+    extra = n_pre + protocol.trials + 8 + (protocol.jar_objects if kind == "experienced" else 0)
+    agent = context_agent(make_config(model, ablate, seed=seed, extra=extra), subjects)
+    s = Subjects(agent, seeds, kind, [[] for _ in seeds])
+    B = subjects
+    no = torch.zeros(B, dtype=torch.bool)
+    if kind == "experienced":
+        lives = [jar_world(x, protocol.jar_objects) for x in seeds]
+        for t in range(protocol.jar_objects):
+            ep = [life[t] for life in lives]
+            agent.step(stack([e[0] for e in ep]), torch.tensor([e[1] for e in ep]), no,
+                       torch.tensor([e[2] for e in ep]), sank=torch.tensor([e[3] for e in ep]))
+            for b, e in enumerate(ep):
+                s.log[b].append(("jar", "jar", e[4]))
+    from sim.apparatus import outcome
+    pre = pretraining_task()
+    opts = pre.options()
+    meas = [perceived(pre, t, o) for t, o in opts]
+    outs = [outcome(pre, pre.start_levels(), t, o) for t, o in opts]
+    orders = []
+    for x in seeds:
+        order = list(range(len(opts))) * protocol.pretrain_repeats
+        random.Random(x * 7919 + 1).shuffle(order)
+        orders.append(order)
+    for step in range(n_pre):
+        chosen = [order[step] for order in orders]
+        agent.step(stack([meas[i] for i in chosen]),
+                   torch.tensor([REWARD_SCALE * max(float(outs[i]["reward_rise_cm"]), 0.0) for i in chosen]), no,
+                   torch.tensor([bool(outs[i]["reached"]) for i in chosen]))
+        for b, i in enumerate(chosen):
+            s.log[b].append(("pretraining", pre.name, opts[i][1].name))
+    return s
+
+
+def play(subjects: Subjects, task_name: str, options: list, world, correct: set, trials: int = TRIALS,
+         protocol: Protocol = Protocol(), aim: str = "gap") -> dict:
+    """The subjects play `trials` trials, learning from each outcome. options[layout][i]: option i's measurement
+    (with "context" and "gap_cm") in layout 0 (as it stands) or 1 (mirrored); world(i) -> (rise_cm, reached) of
+    option i from the trial's starting state. aim: "gap" (default) values an option by its predicted rise less its
+    reward's gap; "rise" by the predicted rise alone (the gap unseen, its ablation). Returns per subject: "right"
+    (per trial), "choices" (option indices), "swapped" (the layout per trial)."""
+    if aim not in AIMS:
+        raise ValueError(f"aim must be one of {AIMS}, got {aim!r}")
+    agent = subjects.agent
+    B, n = agent.batch, len(options[0])
+    # each subject's generator for this task: its positions and choices in one task tell nothing of another's
+    rngs = [random.Random(f"{x}:{task_name}") for x in subjects.seeds]
+    swaps = [balanced_swaps(trials, r) for r in rngs]
+    right = [[] for _ in range(B)]
+    chosen_all = [[] for _ in range(B)]
+    for t in range(trials):
+        layout = [int(swaps[b][t]) for b in range(B)]
+        # every option of every subject in one recall: a copy of each subject per option (learning frozen)
+        view = agent.select(torch.arange(B).repeat_interleave(n))
+        expected = view.predict(stack([options[layout[b]][i] for b in range(B) for i in range(n)])).view(B, n)
+        chosen = []
+        for b in range(B):
+            gaps = [options[layout[b]][i].get("gap_cm", 0.0) if aim == "gap" else 0.0 for i in range(n)]
+            values = [float(expected[b, i]) - REWARD_SCALE * gaps[i] for i in range(n)]
+            chosen.append(softmax_choice(values, protocol.temperature, rngs[b]))
+        outs = [world(i) for i in chosen]
+        agent.step(stack([options[layout[b]][chosen[b]] for b in range(B)]),
+                   torch.tensor([max(REWARD_SCALE * r, 0.0) for r, _ in outs]), torch.zeros(B, dtype=torch.bool),
+                   torch.tensor([bool(x) for _, x in outs]))
+        for b, i in enumerate(chosen):
+            right[b].append(i in correct)
+            chosen_all[b].append(i)
+            subjects.log[b].append(("trial", task_name, i))
+    return {"right": right, "choices": chosen_all, "swapped": swaps}
+
+
+def run_task(task, model: str, seeds: list[int], subjects: int, ablate: tuple = (), trials: int | None = None,
+             outcome=None, perceive=None, aim: str = "gap", kind: str = "naive", protocol: Protocol = Protocol(),
+             ready: dict | None = None) -> dict:
+    """`subjects` subjects of `kind` per seed meet the task on trial 1 (after their pre-training, and their jar life
+    if experienced) and play its trials. outcome: the world (default sim.apparatus.outcome); perceive(task, tube,
+    obj): an option's measurement (default `perceived`, from the task file; train/task_run.py's, from the camera);
+    the pre-training is always the closed form's. ready: {seed: Subjects} made already (make_subjects), copied here.
+    Returns per subject "right", "choices", "swapped", "log" (each episode before and in the task), "seeds", and
+    "chance", "scores" (pooled), "options", "correct"."""
+    trials = protocol.trials if trials is None else trials
     options, world, correct, opts = task_world(task, outcome, perceive)
-    train = list(getattr(task, "train", ()))
-    right, choices = [], []
+    out = {"right": [], "choices": [], "swapped": [], "log": [], "seeds": []}
     for s in seeds:
-        agent = context_agent(make_config(model, ablate, seed=s, extra=len(train) * len(task.tubes) + trials + 8),
-                              orders)
-        explore_opts = [(tube, obj) for obj in train for tube in task.tubes if getattr(tube, "open", True)]
-        levels = {t.name: t.level_cm for t in task.tubes}
-        ex = [(perceive or perceived)(task, tube, obj) for tube, obj in explore_opts]
-        ex_out = [outcome(task, dict(levels), tube, obj) for tube, obj in explore_opts]
-        all_opts = options + ex
-        full_world = lambda i: world(i) if i < len(options) else (float(ex_out[i - len(options)]["reward_rise_cm"]),
-                                                                  bool(ex_out[i - len(options)]["reached"]))
-        rng = random.Random(s * 7919 + 1)
-        explore = []
-        for _ in range(orders):
-            order = list(range(len(options), len(all_opts)))
-            rng.shuffle(order)
-            explore.append(order)
-        r, c = play(agent, all_opts, full_world, correct, explore, trials, seed=s, offered=len(options), aim=aim)
-        right += r
-        choices += c
-    return {"right": right, "choices": choices, "chance": 1.0 / len(options), "scores": score(right, 1 / len(options)),
-            "options": [f"{t.name}:{o.name}" for t, o in opts], "correct": sorted(correct)}
+        subj = (ready[s] if ready and s in ready else make_subjects(model, kind, s, subjects, ablate, protocol))
+        subj = subj.select()
+        r = play(subj, task.name, options, world, correct, trials, protocol, aim)
+        for k in ("right", "choices", "swapped"):
+            out[k] += r[k]
+        out["log"] += subj.log
+        out["seeds"] += subj.seeds
+    chance = 1.0 / len(opts)
+    out.update(chance=chance, scores=score(out["right"], chance), options=[f"{t.name}:{o.name}" for t, o in opts],
+               correct=sorted(correct))
+    return out
+
+
+# -- the studies' analysis -------------------------------------------------------------------------------------------
+def proportion(k: int, n: int) -> dict:
+    """k of n correct: the rate and its 95 % Wilson interval (statsmodels' proportion_confint)."""
+    from statsmodels.stats.proportion import proportion_confint
+    lo, hi = proportion_confint(k, n, alpha=0.05, method="wilson")
+    return {"k": k, "n": n, "rate": k / n, "ci": (float(lo), float(hi))}
+
+
+def subject_test(right: list[bool], chance: float) -> dict:
+    """One subject's exact one-sided binomial test over its trials (scipy.stats.binomtest), as the studies test each
+    bird: passed at p < 0.05."""
+    from scipy.stats import binomtest
+    k, n = sum(right), len(right)
+    p = float(binomtest(k, n, chance, alternative="greater").pvalue)
+    return {"k": k, "n": n, "p": p, "passed": p < 0.05}
+
+
+def learning_slope(right: list[list[bool]]) -> dict:
+    """The learning slope as Ghirlanda & Lind (2017) separate it from initial performance: a logistic model of
+    correct choice on trial number with an intercept per subject (statsmodels GLM, binomial, subject dummies), the
+    slope per trial with its 95 % Wald interval; learned = the interval above 0.
+
+    A subject that chose the same way on every trial tells nothing about a slope once it has an intercept of its
+    own (its intercept goes to infinity), so it is left out of the fit. If every subject's wrong choices all come
+    before its right ones (or all after), the slope's estimate is infinite (perfect separation): then the slope is
+    reported as not estimable and learning is tested exactly, conditional on each subject's number right: with no
+    learning every order of a subject's choices is equally likely, so the chance that all are in order is
+    prod 1 / C(n, k) over the subjects."""
+    import warnings
+
+    import numpy as np
+    import statsmodels.api as sm
+    informative = [r for r in right if 0 < sum(r) < len(r)]
+    if not informative:
+        return {"slope": 0.0, "ci": None, "p": 1.0, "learned": False, "subjects": 0,
+                "note": "not estimable: every subject chose alike on every trial (slope taken as 0)"}
+
+    def ordered(r, up):
+        first = r.index(up) if up in r else len(r)
+        return all(x == up for x in r[first:])
+    for up in (True, False):
+        if all(ordered(list(map(bool, r)), up) for r in informative):
+            p = math.prod(1.0 / math.comb(len(r), sum(r)) for r in informative)
+            return {"slope": math.inf if up else -math.inf, "ci": None, "p": p if up else 1.0,
+                    "learned": up and p < 0.05, "subjects": len(informative),
+                    "note": f"not estimable (perfect separation: every wrong choice {'before' if up else 'after'} "
+                            f"every right one); exact p = {p:.2g}"}
+    y = np.array([float(x) for r in informative for x in r])
+    trial = np.array([t for r in informative for t in range(1, len(r) + 1)], dtype=float)
+    dummies = np.zeros((len(y), len(informative)))
+    row = 0
+    for j, r in enumerate(informative):
+        dummies[row:row + len(r), j] = 1.0
+        row += len(r)
+    X = np.column_stack([trial, dummies])
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        fit = sm.GLM(y, X, family=sm.families.Binomial()).fit()
+    slope, se = float(fit.params[0]), float(fit.bse[0])
+    lo, hi = slope - 1.959964 * se, slope + 1.959964 * se
+    if not (math.isfinite(slope) and math.isfinite(se)):
+        return {"slope": 0.0, "ci": None, "p": 1.0, "learned": False, "subjects": len(informative),
+                "note": "not estimable: the fit did not converge (slope taken as 0)"}
+    return {"slope": slope, "ci": (lo, hi), "p": float(fit.pvalues[0]), "learned": lo > 0,
+            "subjects": len(informative), "note": ""}
+
+
+def after_outcome(right: list[list[bool]]) -> dict:
+    """Does a success raise the next choice's chance of being right more than a failure does (Hennefield et al.
+    2018)? P(correct | previous correct) and P(correct | previous wrong) over every subject's consecutive trials, and
+    Fisher's exact one-sided test of the first above the second (scipy.stats.fisher_exact). Learning alone also makes
+    them differ (later trials are both more often right and more often after a right one)."""
+    from scipy.stats import fisher_exact
+    counts = {True: [0, 0], False: [0, 0]}      # previous outcome -> [right next, trials]
+    for r in right:
+        for prev, cur in zip(r, r[1:]):
+            counts[bool(prev)][0] += bool(cur)
+            counts[bool(prev)][1] += 1
+    rate = {k: (c[0] / c[1] if c[1] else math.nan) for k, c in counts.items()}
+    table = [[counts[True][0], counts[True][1] - counts[True][0]],
+             [counts[False][0], counts[False][1] - counts[False][0]]]
+    p = float(fisher_exact(table, alternative="greater")[1]) if counts[True][1] and counts[False][1] else math.nan
+    return {"after_right": rate[True], "after_wrong": rate[False], "n_after_right": counts[True][1],
+            "n_after_wrong": counts[False][1], "p": p}
+
+
+def analyse(right: list[list[bool]], chance: float) -> dict:
+    """One task, one kind of subject: trial 1 (rate, 95 % interval, exact one-sided p against chance), the learning
+    slope (learning_slope), each subject's binomial test, after_outcome, and the spread over subjects of their
+    share right. passed: more than half the subjects pass their own test (the studies report birds one by one)."""
+    from scipy.stats import binomtest
+    first = [bool(r[0]) for r in right]
+    t1 = proportion(sum(first), len(first))
+    t1["p"] = float(binomtest(sum(first), len(first), chance, alternative="greater").pvalue)
+    subjects = [subject_test(list(map(bool, r)), chance) for r in right]
+    shares = sorted(s["k"] / s["n"] for s in subjects)
+    n_pass = sum(s["passed"] for s in subjects)
+    return {"chance": chance, "trial1": t1, "slope": learning_slope(right), "subjects": subjects,
+            "subjects_passed": n_pass, "passed": n_pass > len(subjects) / 2, "after": after_outcome(right),
+            "spread": {"min": shares[0], "median": shares[len(shares) // 2] if len(shares) % 2 else
+                       (shares[len(shares) // 2 - 1] + shares[len(shares) // 2]) / 2, "max": shares[-1]},
+            "curve": [sum(bool(r[t]) for r in right) / len(right) for t in range(min(map(len, right)))]}
+
+
+def agreement(model_passed: dict, published: dict) -> tuple[int, int]:
+    """(tasks where the model's pass/fail matches the animals', tasks both did): model_passed {task: bool},
+    published {task: "passed" | "failed" | anything else (not tested)}."""
+    both = [t for t in model_passed if published.get(t) in ("passed", "failed")]
+    return sum(model_passed[t] == (published[t] == "passed") for t in both), len(both)

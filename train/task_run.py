@@ -5,8 +5,9 @@ tube's width, level and the look of what fills it become the agent's context pro
 agents have them, but measured from images instead of read from the file. Every (tube, object) option, and every
 exploration drop, is simulated from the task's starting levels (each trial is set up afresh, as in the studies), and
 its reward tube's rise is measured from the simulation. pybullet is deterministic, so each distinct drop is simulated
-once and its measured outcome replayed on every trial that repeats it. Then `--orders` agents of `--seed` explore
-and play the task's 20 trials (train.battery.run_task), scored as the animal studies score them.
+once and its measured outcome replayed on every trial that repeats it. Then `--orders` naive subjects of `--seed`,
+pre-trained on stones in a jar-like tube (the closed form's: the pre-training is no part of the task), meet the task
+on trial 1 and play its 20 trials, its tubes mirrored on half of them (train.battery.run_task).
 
 Writes into --out: summary.json (the perceived tubes, each option's simulated and closed-form rise, every agent's
 choices, the scores), tb/ (per trial: the share of agents choosing right, the mean rise they got) and, with
@@ -79,7 +80,7 @@ class PhysicsWorld:
         s = self.seen[tube.name]
         lo, hi = WIDTH_RANGE_CM
         d = min(max(s["width_cm"], lo), hi)
-        names = [t.name for t in self.task.tubes]
+        names = [t.name for t in task.tubes]   # the task as laid out on this trial (train.battery.mirrored)
         m["context"] = {"surface": look(s["substrate_rgb"]),
                         "width": (math.log(d) - math.log(lo)) / (math.log(hi) - math.log(lo)),
                         "level": min(max(s["level_cm"] / tube.height_cm, 0.0), 1.0),   # the rim is the workspace's
