@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
-from .encoders import PROPERTIES, SPLIT_PROPERTIES, EncoderConfig
+from .encoders import SPLIT_PROPERTIES, EncoderConfig
 from .hub import HubConfig
 from .memory import MemoryConfig
 from .rules import RulesConfig
@@ -234,7 +234,7 @@ class AgentConfig:
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
         n = len(self.properties)
         if len(self.delta_p_band) == len(self.encoder.properties) < n:   # the context properties' bands, unless given
-            self.delta_p_band += (tuple(map(float, self.CONTEXT_DELTA_BAND)),) * (n - len(PROPERTIES))
+            self.delta_p_band += (tuple(map(float, self.CONTEXT_DELTA_BAND)),) * (n - len(self.encoder.properties))
         if len(self.delta_p_band) != n or any(not 0 <= lo <= hi for lo, hi in self.delta_p_band):
             raise ValueError(f"AgentConfig.delta_p_band needs {n} (lo, hi) pairs with 0 <= lo <= hi (one per "
                              f"property: {', '.join(self.properties)}), got {self.delta_p_band}")

@@ -40,7 +40,7 @@ from record import run_main  # noqa: E402
 
 # the transfer model of the last line: "extended" until the contextual model (AgentConfig.named("contextual"))
 # replaces it; switch it here
-MODEL = "extended"
+MODEL = "contextual"
 TASKS = ("water_vs_sand", "sinking_vs_floating", "solid_vs_hollow", "high_vs_low_water", "narrow_vs_wide", "u_tube",
          "large_vs_small", "water_vs_sawdust")
 OBJECT_TASKS = ("sinking_vs_floating", "solid_vs_hollow", "large_vs_small")
