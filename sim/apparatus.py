@@ -17,8 +17,8 @@ import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
-from sim.objects import (MAX_NAME_CHARS, NAME_RE, ObjectsConfig, ObjectsFileError, ObjectSpec, JarSpec,
-                         _no_unknown_keys, _number, _parse_object, _quoted, _show, archimedes_cm3, load_objects)
+from sim.objects import (MAX_NAME_CHARS, NAME_RE, WATER_DENSITY_G_CM3, ObjectsConfig, ObjectsFileError, ObjectSpec,
+                         JarSpec, _no_unknown_keys, _number, _parse_object, _quoted, _show, archimedes_cm3, load_objects)
 
 SUBSTRATES = ("water", "sand", "sawdust")
 TOP_KEYS = {"apparatus", "objects", "train", "probe", "correct"}
@@ -118,7 +118,9 @@ def displaced_cm3(tube_substrate: str, obj: ObjectSpec, jar: JarSpec) -> float:
 
 def outcome(task: Task, levels: dict, tube: Tube, obj: ObjectSpec) -> dict:
     """One drop of `obj` into `tube` from `levels` ({tube name: cm}): {"levels", "rise_cm" (per tube),
-    "reward_rise_cm" (the most any reward tube rose), "reached" (a reward tube's surface within reach)}."""
+    "reward_rise_cm" (the most any reward tube rose), "reached" (a reward tube's surface within reach), "sank" (the
+    object came to rest on the bottom or on the bed, as the robot sees it: a floater in water did not; a hollow cup
+    fills and sinks)}."""
     new = dict(levels)
     names = task.group(tube.name)
     group = [task.tube(n) for n in names]
@@ -132,9 +134,11 @@ def outcome(task: Task, levels: dict, tube: Tube, obj: ObjectSpec) -> dict:
             new[n] = levels[n] + rise
     rises = {n: new[n] - levels[n] for n in levels}
     rewards = [t for t in task.tubes if t.reward]
+    floats = (tube.substrate == "water" and getattr(obj, "wall_cm", None) is None
+              and obj.mass_g < obj.volume_cm3 * WATER_DENSITY_G_CM3)
     return {"levels": new, "rise_cm": rises,
             "reward_rise_cm": max((rises[t.name] for t in rewards), default=0.0),
-            "reached": any(new[t.name] >= t.height_cm - task.reach_cm for t in rewards)}
+            "reached": any(new[t.name] >= t.height_cm - task.reach_cm for t in rewards), "sank": not floats}
 
 
 def correct_options(task: Task) -> list[tuple[str, str]]:

@@ -198,6 +198,7 @@ def task_world(task, outcome=None, perceive=None):
     outs = [outcome(task, dict(levels), tube, obj) for tube, obj in opts]
     rises = [float(o["reward_rise_cm"]) for o in outs]
     reached = [bool(o["reached"]) for o in outs]
+    sank = [o.get("sank") for o in outs]   # the fate as the robot sees it (None: a world that does not say)
     named = set(map(tuple, getattr(task, "correct", ()) or ()))
     correct = ({i for i, (t, o) in enumerate(opts) if (t.name, o.name) in named} or
                {i for i, r in enumerate(reached) if r} or {i for i, r in enumerate(rises) if r == max(rises)})
@@ -206,7 +207,13 @@ def task_world(task, outcome=None, perceive=None):
     by_name = {(t.name, o.name): (t, o) for t, o in mirror.options()}
     options = [[look(task, t, o) for t, o in opts],
                [look(mirror, *by_name[(t.name, o.name)]) for t, o in opts]]
-    return options, (lambda i: (rises[i], reached[i])), correct, opts
+    return options, (lambda i: (rises[i], reached[i], sank[i])), correct, opts
+
+
+def seen_fates(sank: list):
+    """(B,) bool of the objects' fates as the robot saw them, or None where any was not reported (the agent then
+    stores the episodes without a fate)."""
+    return None if any(s is None for s in sank) else torch.tensor([bool(s) for s in sank])
 
 
 def balanced_swaps(n: int, rng: random.Random) -> list[bool]:
@@ -305,7 +312,8 @@ def make_subjects(model: str, kind: str, seed: int, subjects: int, ablate: tuple
         chosen = [order[step] for order in orders]
         agent.step(stack([meas[i] for i in chosen]),
                    torch.tensor([REWARD_SCALE * max(float(outs[i]["reward_rise_cm"]), 0.0) for i in chosen]), no,
-                   torch.tensor([bool(outs[i]["reached"]) for i in chosen]))
+                   torch.tensor([bool(outs[i]["reached"]) for i in chosen]),
+                   sank=seen_fates([outs[i].get("sank") for i in chosen]))
         for b, i in enumerate(chosen):
             s.log[b].append(("pretraining", pre.name, opts[i][1].name))
     return s
@@ -314,7 +322,7 @@ def make_subjects(model: str, kind: str, seed: int, subjects: int, ablate: tuple
 def play(subjects: Subjects, task_name: str, options: list, world, correct: set, trials: int = TRIALS,
          protocol: Protocol = Protocol(), aim: str = "gap") -> dict:
     """The subjects play `trials` trials, learning from each outcome. options[layout][i]: option i's measurement
-    (with "context" and "gap_cm") in layout 0 (as it stands) or 1 (mirrored); world(i) -> (rise_cm, reached) of
+    (with "context" and "gap_cm") in layout 0 (as it stands) or 1 (mirrored); world(i) -> (rise_cm, reached, sank) of
     option i from the trial's starting state. aim: "gap" (default) values an option by its predicted rise less its
     reward's gap; "rise" by the predicted rise alone (the gap unseen, its ablation). Returns per subject: "right"
     (per trial), "choices" (option indices), "swapped" (the layout per trial)."""
@@ -338,9 +346,10 @@ def play(subjects: Subjects, task_name: str, options: list, world, correct: set,
             values = [float(expected[b, i]) - REWARD_SCALE * gaps[i] for i in range(n)]
             chosen.append(softmax_choice(values, protocol.temperature, rngs[b]))
         outs = [world(i) for i in chosen]
+        sank = [o[2] if len(o) > 2 else None for o in outs]
         agent.step(stack([options[layout[b]][chosen[b]] for b in range(B)]),
-                   torch.tensor([max(REWARD_SCALE * r, 0.0) for r, _ in outs]), torch.zeros(B, dtype=torch.bool),
-                   torch.tensor([bool(x) for _, x in outs]))
+                   torch.tensor([max(REWARD_SCALE * o[0], 0.0) for o in outs]), torch.zeros(B, dtype=torch.bool),
+                   torch.tensor([bool(o[1]) for o in outs]), sank=seen_fates(sank))
         for b, i in enumerate(chosen):
             right[b].append(i in correct)
             chosen_all[b].append(i)
