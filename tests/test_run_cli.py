@@ -295,7 +295,7 @@ def test_a_bad_config_file_is_refused_in_one_line(tmp_path):
              "unknown.toml": ("[rules]\nbogus = 1\n", ["unknown.toml: unknown key rules.bogus"]),
              "wrong_type.toml": ("[memory]\nmax_episodes = 1.5\n", ["wrong_type.toml: memory.max_episodes takes an "
                                                                      "integer (int), got 1.5"]),
-             "model.toml": ('model = "bayes"\n', ["model takes one of paper, extended, got 'bayes'"])}
+             "model.toml": ('model = "bayes"\n', ["model takes one of paper, contextual, extended, got 'bayes'"])}
     for name, (text, words) in files.items():
         f = tmp_path / name
         f.write_text(text)

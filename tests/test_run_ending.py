@@ -286,7 +286,9 @@ def test_a_pool_dropped_with_a_killed_idle_process_does_not_hang_in_its_finalise
 
 
 def test_signals_held_defers_a_signal_to_the_end_of_the_block_and_raises_it_once():
+    # Ctrl-C's handler first: a shell's background job starts with SIGINT ignored, and Python then installs none
     code = ("import os, signal\n"
+            "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
             "from train.endings import Ended, ending_signals, signals_held\n"
             "with ending_signals():\n"
             "    try:\n"

@@ -372,4 +372,4 @@ def test_the_example_in_docs_and_the_shipped_sweep_files_load():
               "benches/learning_curve.toml"):
         assert sweep.load_sweep(ROOT / f)[1]
     _, cells = sweep.load_sweep(ROOT / "benches" / "ablation.toml")
-    assert len(cells) == 6 * (30 + 10 + 8)
+    assert len(cells) == 11 * (30 + 10 + 8)   # paper, contextual and extended with their ablations
