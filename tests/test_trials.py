@@ -395,3 +395,18 @@ def test_run_cli_refuses_an_unknown_goal_word_and_writes_nothing(tmp_path):
     assert r.returncode == 2 and r.stderr.count("\n") == 1 and not r.stdout, r.stderr
     assert "trials[0] field 'goal': unknown word(s) 'fetch'" in r.stderr and "reach ball the a" in r.stderr
     assert not out.exists()
+
+
+def test_a_goal_trial_drop_not_delivered_or_negative_is_never_kept():
+    """A goal trial's drop is checked as an episode's: not delivered into the jar, or a negative or non-finite
+    volume read, ends the run (BadOutcome) instead of entering the trial's records."""
+    from types import SimpleNamespace
+
+    from train.experiment import BadOutcome
+    from train.trials import outcome_dict
+    ok = dict(observed_cm3=10.0, goal_reachable_before=False, goal_reached_after=False, sank=True,
+              measurement={"rgb": [0.5, 0.5, 0.5], "extent_cm": [3.0, 3.0, 3.0], "fill": 1.0, "mass_g": 50.0})
+    assert outcome_dict(SimpleNamespace(**ok))["observed_cm3"] == 10.0
+    for bad in ({"delivered": False}, {"observed_cm3": -3.0}, {"observed_cm3": float("nan")}):
+        with pytest.raises(BadOutcome):
+            outcome_dict(SimpleNamespace(**{**ok, **bad}))

@@ -223,8 +223,14 @@ TRIAL_OUTCOME_KEYS = ("observed_cm3", "goal_before", "goal_after", "sank", "meas
 
 
 def outcome_dict(outcome) -> dict:
-    """The part of a world EpisodeOutcome a trial keeps (TRIAL_OUTCOME_KEYS)."""
-    from train.experiment import plain_measurement
+    """The part of a world EpisodeOutcome a trial keeps (TRIAL_OUTCOME_KEYS). A goal trial's drop that was not
+    delivered into the jar, or read a non-finite or negative volume, ends the run in one line (BadOutcome, as an
+    episode's: train.experiment.check_outcome) rather than teach the agent what the world did not do."""
+    from train.experiment import BadOutcome, plain_measurement
+    cm3 = float(outcome.observed_cm3)
+    if getattr(outcome, "delivered", True) is False or not math.isfinite(cm3) or cm3 < 0:
+        raise BadOutcome(f"a goal trial's drop of {getattr(outcome, 'name', 'an object')!r} was not delivered into "
+                         f"the jar or read {cm3!r} cm^3; its trial is not recorded")
     return {"observed_cm3": float(outcome.observed_cm3), "goal_before": bool(outcome.goal_reachable_before),
             "goal_after": bool(outcome.goal_reached_after), "sank": bool(outcome.sank),
             "measurement": plain_measurement(outcome.measurement)}
