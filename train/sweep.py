@@ -1301,6 +1301,8 @@ def _main(argv, on_cell, reinstall) -> int:
                 done = len(list((out / "cells").glob("*.parquet")))
                 print(f"{_fresh_line()}{PROG}: interrupted{by}: {done} of {n_cells} cell(s) on disk in "
                       f"{out / 'cells'} (--resume runs the rest)", file=sys.stderr)
+            if argv is None:   # the command line's sweep: its one line said, Ray's teardown says nothing more
+                _silence_stderr()
             _stop_ray(owns_ray)
             owns_ray = False
         return code
@@ -1318,6 +1320,19 @@ def _finish(out: Path | None, record: dict | None, run: dict | None, how: str, f
     run.update(ended=utc_now(), ended_by=how, cells_run=len(run["cells"]), cells_failed=failed)
     try:
         _write_record(out, record)
+    except OSError:
+        pass
+
+
+def _silence_stderr() -> None:
+    """fd 2 to /dev/null: Ray's core worker writes to it directly while it tears down after an interruption (a cell
+    that finished after the driver let go: 'Failed to push error to driver for task ...'), after the sweep's one
+    line. Only for the command line (main() with argv None): a caller's own stderr is left alone."""
+    try:
+        sys.stderr.flush()
+        fd = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(fd, 2)
+        os.close(fd)
     except OSError:
         pass
 
