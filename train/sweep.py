@@ -1155,17 +1155,8 @@ def _ending_signals():
             signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
 
 
-@contextlib.contextmanager
-def _quiet():
-    """A second Ctrl-C (or SIGTERM, SIGHUP) must not interrupt the clean-up after the first (only the main thread may
-    set handlers)."""
-    main = threading.current_thread() is threading.main_thread()
-    previous = {sig: signal.signal(sig, signal.SIG_IGN) for sig in (signal.SIGINT, *ENDING)} if main else {}
-    try:
-        yield
-    finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
+# a second Ctrl-C (or SIGTERM, SIGHUP) must not interrupt the clean-up after the first: the runner's guard
+from train.endings import sigint_ignored as _quiet  # noqa: E402
 
 
 def _how(e: KeyboardInterrupt) -> tuple[str, int]:
