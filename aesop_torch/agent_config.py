@@ -6,7 +6,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
-from .encoders import SPLIT_PROPERTIES, EncoderConfig
+from .encoders import PROPERTIES, SPLIT_PROPERTIES, EncoderConfig
 from .hub import HubConfig
 from .memory import MemoryConfig
 from .rules import RulesConfig
@@ -226,6 +226,9 @@ class AgentConfig:
         if self.learning not in LEARNING or self.readout not in READOUTS:
             raise ValueError(f"AgentConfig.learning must be one of {', '.join(LEARNING)} and readout one of "
                              f"{', '.join(READOUTS)}, got {self.learning!r}, {self.readout!r}")
+        if self.readout == "prior_fit" and tuple(self.encoder.properties) != PROPERTIES:
+            raise ValueError(f"AgentConfig.readout 'prior_fit' reads the paper's four properties {PROPERTIES} (its "
+                             f"priors are on shape's fill and size as a length), not {tuple(self.encoder.properties)}")
         if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0 or not self.fate_recalls >= 1:
             raise ValueError(f"AgentConfig.compare_floor must be in 0..1, fit_sharpness > 0 and fate_recalls >= 1, "
                              f"got {self.compare_floor}, {self.fit_sharpness}, {self.fate_recalls}")

@@ -145,3 +145,11 @@ def test_the_papers_episodes_1_to_3(developed):
     assert e3.encoded[0] and e3.rules_fired()[0, WEIGHT] == 2                    # Growth
     assert "weight" in agent.rules.by_context(0)["fate"]["dominant"]
     assert agent.knowledge(0)["color"]["state"] == "irrelevant"
+
+
+def test_the_prior_readout_is_refused_on_properties_it_cannot_read():
+    """The fit with physics priors reads the paper's four properties (shape's fill, size as a length): on the split
+    five it would read fill as shape and elongation as size, so the config refuses it in one line."""
+    with pytest.raises(ValueError, match="prior_fit"):
+        AgentConfig.contextual(readout="prior_fit")
+    assert AgentConfig.extended().readout == "prior_fit"
