@@ -70,9 +70,14 @@ class OrderLog:
 
     @contextlib.contextmanager
     def _named(self):
-        """An OSError without a file name (the writer thread's failed write, raised again here) names the log."""
+        """An OSError without a file name (the writer thread's failed write, raised again here) names the log. A
+        signal meanwhile takes effect when the call is done (train.endings.signals_held): raised inside the writer's
+        queue it could leave the queue's lock held, and closing the log then waited for ever (seen once: SIGTERM at a
+        goal trial's line)."""
+        from train.endings import signals_held
         try:
-            yield
+            with signals_held():
+                yield
         except OSError as e:
             if e.filename is None:
                 e.filename = str(self.logdir)
