@@ -295,12 +295,9 @@ class Agent(nn.Module):
         """(B,) how likely the object sinks: the recalled episodes' seen fates, each weighted by its recall strength
         to the power recall_sharpness (as the average weighs rewards); 0.5 where no fate was seen."""
         fates = self._fates(recall)
-        seen = fates >= 0
-        s = torch.where(seen, recall.strength, torch.zeros_like(recall.strength)).double()
-        w = (s / s.amax(-1, keepdim=True).clamp_min(1e-300)) ** self.config.recall_sharpness * seen
-        total = w.sum(-1)
-        p = (w * (fates == 1)).sum(-1) / total.clamp_min(1e-300)
-        return torch.where(total > 0, p, torch.full_like(p, 0.5)).float()
+        sank = torch.where(fates >= 0, fates.float(), torch.full_like(fates, float("nan"), dtype=torch.float32))
+        p = recall_average(sank, recall.strength * recall.valid, self.config.recall_sharpness)
+        return torch.nan_to_num(p, nan=0.5)
 
     def _dominant(self, fate: torch.Tensor) -> torch.Tensor:
         """(B, P) the properties dominant in each agent's expected fate (fate (B,) long: 0 floats, 1 sinks), or

@@ -129,20 +129,24 @@ def compare(a, stored: torch.Tensor, fate: torch.Tensor, learn: torch.Tensor, co
     # of a whole memory)
     used = max(1, int(compared.sum(1).max()))
     for k in range(used):
-        recalled_k = {p: v[:, k:k + 1] for p, v in a.recalled_values.items()}
-        if regrow:   # what changed at full strength, for growing an eliminated pathway back
-            full, full_unclear = delta_property(a.values, recalled_k, config)
-            bottom_up = full[:, 0] & ~full_unclear[:, 0].any(-1, keepdim=True)
+        # what changed at full strength: what each context's pathways show of it, and (contextual) what may grow an
+        # eliminated pathway back
+        full, full_unclear = delta_property(a.values, {p: v[:, k:k + 1] for p, v in a.recalled_values.items()},
+                                            config)
+        full, full_unclear = full[:, 0], full_unclear[:, 0]
+        if regrow:
+            bottom_up = full & ~full_unclear.any(-1, keepdim=True)
         for ctx, dc, unclear_c, applies in judgments(config, fate, a.fates[:, k], stored[:, 0], a.rewards[:, k]):
-            # each comparison sees the pathways as they are in its context, after the comparisons before it
+            # each comparison sees the pathways as they are in its context, after the comparisons before it: an
+            # eliminated one (at or below the retro-activation floor) shows no change (delta_property's gate)
             cs = rules.context_strength()
-            gate = cs[rows, ctx] if ctx is not None else cs[:, 0]
-            dp, unclear = delta_property(a.values, recalled_k, config, gate[:, None])
+            live = (cs[rows, ctx] if ctx is not None else cs[:, 0]) > config.retro_floor
+            unclear = full_unclear & live
             on = compared[:, k] & applies
-            use = on & ~cannot_tell(unclear[:, 0], dc, unclear_c)
+            use = on & ~cannot_tell(unclear, dc, unclear_c)
             if config.strict_comparisons:   # a property in its dead zone may have cancelled a change
-                use &= ~unclear[:, 0].any(-1)
-            dp = dp[:, 0] & use[:, None]
+                use &= ~unclear.any(-1)
+            dp = full & live & use[:, None]
             delta_p[:, k] |= dp
             delta_c[:, k] |= dc & on
             unclear_out[:, k] |= unclear_c & on

@@ -36,6 +36,7 @@ from __future__ import annotations
 import torch
 from torch import nn
 
+from .incremental_rules import certainties_of, edited, states_of
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, LIKELY_IRRELEVANT, PROPERTIES, STATES, STATUS_QUO,
                     UNCERTAINTY, UNKNOWN, RulesConfig)
 
@@ -66,12 +67,7 @@ class ContextualRules(nn.Module):
     @property
     def context_state(self) -> torch.Tensor:
         """(B, C, P) the knowledge in each context (codes into STATES)."""
-        s = self.strength
-        state = torch.full(s.shape, UNKNOWN, dtype=torch.long, device=s.device)
-        state[self.fired[..., UNCERTAINTY] > 0] = LIKELY_IRRELEVANT
-        state[s > 1.0] = DOMINANT
-        state[s <= self.retro_floor] = IRRELEVANT
-        return state
+        return states_of(self.strength, self.fired[..., UNCERTAINTY], self.retro_floor)
 
     @property
     def eliminated(self) -> torch.Tensor:
@@ -89,11 +85,7 @@ class ContextualRules(nn.Module):
     @property
     def context_certainty(self) -> torch.Tensor:
         """(B, C, P) 1 for dominant and irrelevant, 1 - (1 - step)^n after n Uncertainty firings, 0 unknown."""
-        state = self.context_state
-        grown = 1.0 - (1.0 - self.config.certainty_step) ** self.fired[..., UNCERTAINTY].to(torch.float32)
-        grown[state == UNKNOWN] = 0.0
-        grown[(state == DOMINANT) | (state == IRRELEVANT)] = 1.0
-        return grown
+        return certainties_of(self.context_state, self.fired[..., UNCERTAINTY], self.config.certainty_step)
 
     @property
     def certainty(self) -> torch.Tensor:
@@ -138,7 +130,7 @@ class ContextualRules(nn.Module):
             ctx = torch.full((B,), slot, dtype=torch.long, device=rows.device) if slot is not None else context
             up = None if bottom_up is None else bottom_up & ~nowhere
             f = self._fire(self.strength[rows, ctx], delta_p, delta_c, compared, up)
-            self.strength[rows, ctx] = self._edit(self.strength[rows, ctx], f)
+            self.strength[rows, ctx] = edited(self.strength[rows, ctx], f, self.config)
             self.fired[rows, ctx] += torch.nn.functional.one_hot(f, 4)
             fired = f
         self._read_state()
@@ -166,12 +158,6 @@ class ContextualRules(nn.Module):
             fired[back] = GROWTH
             fired[back.any(-1, keepdim=True).expand_as(fired) & (fired == UNCERTAINTY)] = STATUS_QUO
         return fired
-
-    def _edit(self, s, fired) -> torch.Tensor:
-        c = self.config
-        s = torch.where(fired == ELIMINATION, s.clamp(max=c.eliminated_strength), s)
-        s = torch.where(fired == GROWTH, (s + c.growth_step).clamp(max=c.dominant_strength), s)
-        return torch.where(fired == UNCERTAINTY, (s * c.uncertain_decay).clamp(min=c.uncertain_floor).minimum(s), s)
 
     # -- reading ------------------------------------------------------------------------------------------------
     def knowledge(self, b: int = 0) -> dict:

@@ -34,6 +34,33 @@ from .rules import (CONTEXTS, DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, LIKELY_
                     STATUS_QUO, UNCERTAINTY, UNKNOWN, RulesConfig)
 
 
+def edited(s: torch.Tensor, fired: torch.Tensor, c: RulesConfig) -> torch.Tensor:
+    """The strengths s after the firings `fired` (codes into RULE_NAMES, s's shape): Elimination drops a pathway to
+    the eliminated strength, Growth adds a step (up to the dominant strength), Uncertainty keeps `uncertain_decay` of
+    it (never below the floor, never raising it). Shared with contextual_rules.py, which keeps s per context."""
+    s = torch.where(fired == ELIMINATION, s.clamp(max=c.eliminated_strength), s)
+    s = torch.where(fired == GROWTH, (s + c.growth_step).clamp(max=c.dominant_strength), s)
+    return torch.where(fired == UNCERTAINTY, (s * c.uncertain_decay).clamp(min=c.uncertain_floor).minimum(s), s)
+
+
+def states_of(s: torch.Tensor, uncertain: torch.Tensor, retro_floor: float) -> torch.Tensor:
+    """Knowledge codes (STATES) read from strengths s and Uncertainty counts of s's shape: irrelevant at or below
+    the retro-activation floor, dominant above 1, likely irrelevant once Uncertainty fired, else unknown."""
+    state = torch.full(s.shape, UNKNOWN, dtype=torch.long, device=s.device)
+    state[uncertain > 0] = LIKELY_IRRELEVANT
+    state[s > 1.0] = DOMINANT
+    state[s <= retro_floor] = IRRELEVANT
+    return state
+
+
+def certainties_of(state: torch.Tensor, uncertain: torch.Tensor, step: float) -> torch.Tensor:
+    """Certainty of each state: 1 dominant or irrelevant, 0 unknown, 1 - (1 - step)^n after n Uncertainty firings."""
+    grown = 1.0 - (1.0 - step) ** uncertain.to(torch.float32)
+    grown[state == UNKNOWN] = 0.0
+    grown[(state == DOMINANT) | (state == IRRELEVANT)] = 1.0
+    return grown
+
+
 class IncrementalRules(nn.Module):
     """E/G/U/S applied one comparison at a time to per-property pathway strengths; batched over agents (dim B).
 
@@ -53,10 +80,7 @@ class IncrementalRules(nn.Module):
 
     @property
     def certainty(self) -> torch.Tensor:
-        grown = 1.0 - (1.0 - self.config.certainty_step) ** self.fired[..., UNCERTAINTY].to(torch.float32)
-        grown[self.state == UNKNOWN] = 0.0
-        grown[(self.state == DOMINANT) | (self.state == IRRELEVANT)] = 1.0
-        return grown
+        return certainties_of(self.state, self.fired[..., UNCERTAINTY], self.config.certainty_step)
 
     # the extended model's per-context views, for code that reads either model: one context holds for all
     @property
@@ -96,10 +120,7 @@ class IncrementalRules(nn.Module):
         fired[dp & ~dc & clean] = ELIMINATION
         fired[dp & dc & clean] = GROWTH
         fired[~dp & dc & undecided] = UNCERTAINTY
-        s = self.strength
-        s.copy_(torch.where(fired == ELIMINATION, s.clamp(max=c.eliminated_strength), s))
-        s.copy_(torch.where(fired == GROWTH, (s + c.growth_step).clamp(max=c.dominant_strength), s))
-        s.copy_(torch.where(fired == UNCERTAINTY, (s * c.uncertain_decay).clamp(min=c.uncertain_floor).minimum(s), s))
+        self.strength.copy_(edited(self.strength, fired, c))
         self.fired.scatter_add_(2, fired[..., None], torch.ones_like(fired[..., None]))
         self._read_state()
         if strength is not None:
@@ -107,12 +128,7 @@ class IncrementalRules(nn.Module):
         return fired
 
     def _read_state(self) -> None:
-        s = self.strength
-        state = torch.full_like(self.state, UNKNOWN)
-        state[self.fired[..., UNCERTAINTY] > 0] = LIKELY_IRRELEVANT
-        state[s > 1.0] = DOMINANT
-        state[s <= self.retro_floor] = IRRELEVANT
-        self.state.copy_(state)
+        self.state.copy_(states_of(self.strength, self.fired[..., UNCERTAINTY], self.retro_floor))
 
     def knowledge(self, b: int = 0) -> dict:
         cert = self.certainty[b]
