@@ -72,8 +72,6 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
-GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0)),
-         "contextual +knowledge": ("contextual", ("rules",), None)}
 # the physically right knowledge per context (contextual_rules.CONTEXTS; properties SPLIT_PROPERTIES): a floater
 # displaces its weight, a sinker its volume (fill and size), and whether it floats depends on all three. Given by
 # hand as strengths (3 dominant, 0.05 eliminated), and checked on a life's final knowledge (RIGHT: the letters each
@@ -81,6 +79,9 @@ GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0)),
 RIGHT = {"floating": "IIIID", "sinking": "IDIDI", "fate": ".D.DD"}
 RIGHT_STRENGTH = [[0.05 if c == "I" else 3.0 if c == "D" else 1.0 for c in RIGHT[k]]
                   for k in ("floating", "sinking", "fate")]
+# the hub's strengths per property (paper), or the rules' per context and property (contextual)
+GIVEN = {"paper +knowledge": ("paper", ("rules",), (0.05, 1.0, 3.0, 3.0)),
+         "contextual +knowledge": ("contextual", ("rules",), RIGHT_STRENGTH)}
 LIFE_CHECKS = (8, 24, 64, 230)
 
 
@@ -140,11 +141,11 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)
-    if given is not None:
-        agent.hub.strength[:, :len(given)] = torch.tensor(given)
-    elif condition in GIVEN:   # the contextual model: per context
-        agent.rules.strength[:] = torch.tensor(RIGHT_STRENGTH)
+    if given is not None and torch.tensor(given).ndim == 2:   # per context: the contextual rules' strengths
+        agent.rules.strength[:] = torch.tensor(given)
         agent._set_judged_strength(agent.rules.strength_from_knowledge())
+    elif given is not None:
+        agent.hub.strength[:, :len(given)] = torch.tensor(given)
     errs = {}
     for t in range(n_train):
         obj = orders[:, t]
@@ -200,12 +201,17 @@ def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None, times:
     return pa.concat_tables(tables)
 
 
-def final_rows(table, condition: str, group: str) -> list[dict]:
-    """The rows of the condition's runs on a set group at their last episode, as dicts."""
+def final(table, condition: str, group: str):
+    """The rows (a pyarrow Table) of the condition's runs on a set group at their last episode."""
     import pyarrow.compute as pc
     m = pc.and_(pc.and_(pc.equal(table.column("condition"), condition), pc.equal(table.column("set_group"), group)),
                 pc.equal(table.column("episode"), table.column("n_train")))
-    return table.filter(m).to_pylist()
+    return table.filter(m)
+
+
+def final_rows(table, condition: str, group: str) -> list[dict]:
+    """`final`'s rows as dicts."""
+    return final(table, condition, group).to_pylist()
 
 
 def right_per_context(key: str | None) -> bool:
@@ -226,10 +232,7 @@ def context_agreement(table, condition: str, group: str) -> float:
 
 def final_share(table, condition: str, group: str, prop: str, letter: str) -> float:
     """The share of (set, order) whose final knowledge of prop (a rows column: color, weight, size, shape) is letter."""
-    import pyarrow.compute as pc
-    m = pc.and_(pc.and_(pc.equal(table.column("condition"), condition), pc.equal(table.column("set_group"), group)),
-                pc.equal(table.column("episode"), table.column("n_train")))
-    v = table.filter(m).column(prop).to_pylist()
+    v = final(table, condition, group).column(prop).to_pylist()
     return sum(x == letter for x in v) / max(len(v), 1)
 
 
