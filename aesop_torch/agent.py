@@ -31,7 +31,7 @@ Choices the paper leaves open, made here (where one model only, it says which):
 - Goals in words: the teacher's goal phrase ("reach the green ball") is heard through the word map and drives the
   body hub's goal state (`hear_goal`); that state, with the body's present state (the ball out of reach), cues the
   episodic memory through the body rows (`goal_recall`), and what the goal needs is read from the episodes it
-  brings back (train.trials.needed_cm3). A phrase without the goal's words is no goal the agent knows: no recall.
+  brings back (train.learning.goal_trials.needed_cm3). A phrase without the goal's words is no goal the agent knows: no recall.
   The goal words join the word map's vocabulary, not a lexicon of their own, so a goal is heard as a name is and
   bound as a word-map pattern (a separate lexicon would be a lookup table beside the network).
 - Encoding: an episode is not encoded when there is nothing new to learn (the paper's episode 2): the episode it is

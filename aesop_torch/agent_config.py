@@ -40,7 +40,7 @@ class AgentConfig:
     # from one 5-neuron row, exact recall from the object cue held to ~32 episodes, from 12 2-neuron rows it holds
     # to 230 (benches/memory_capacity.py). Sparse 2-of-50 rows are the memory's best case (random episodes: 275).
     # A full hub refuses a new object (HubConfig.when_full, the library's default, kept here): a run is sized for its
-    # objects (train.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
+    # objects (train.learning.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
     # big for its agents. A longer life sets both when_full to "forget_oldest" or "forget_weakest" (Agent._encode:
     # an object's assembly and its episodes leave together).
     hub: HubConfig = field(default_factory=lambda: HubConfig(rows=len(OBJECT_ROWS), assembly_size=2))

@@ -49,15 +49,15 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 import torch  # noqa: E402
 
 from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
-from aesop_torch.rules import DOMINANT, IRRELEVANT  # noqa: E402
+from aesop_torch.rules import DOMINANT, IRRELEVANT, KNOWLEDGE_LETTERS  # noqa: E402
 from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.population import knowledge_keys  # noqa: E402
-from train.physics import cores  # noqa: E402
-from train.progress import Step  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.learning.population import knowledge_keys  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
+from train.common.progress import Step  # noqa: E402
 from train import sweep  # noqa: E402
 from train.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
@@ -304,7 +304,7 @@ def main():
 
         def share(prop, code):
             if c in MODELS:
-                return "/".join(f"{final_share(rows, c, GROUPS[k], prop, sweep.KNOWLEDGE_LETTERS[code]):.2f}"
+                return "/".join(f"{final_share(rows, c, GROUPS[k], prop, KNOWLEDGE_LETTERS[code]):.2f}"
                                 for k in ("8", "24", "life"))
             parts = [torch.cat([r["state"][:, r["properties"].index(prop)] for r in res[k, c]])
                      for k in ("8", "24", "life")]

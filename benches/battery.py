@@ -4,7 +4,7 @@
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
                               [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
 
-Per task (sim/tasks/<task>.json) and per kind of subject (train/battery.py): naive subjects have the studies'
+Per task (sim/tasks/<task>.json) and per kind of subject (train/battery/tasks.py): naive subjects have the studies'
 pre-training only (stones into a single jar-like tube of water), experienced ones a jar life of --jar-objects
 generated objects first. Every subject meets the test apparatus and objects on trial 1, chooses by a softmax over
 each option's value (its predicted rise less the reward's gap), the apparatus mirrored on half the trials, and
@@ -94,7 +94,7 @@ def _job(args):
     import torch
     torch.set_num_threads(1)
     from sim.apparatus import load_task
-    from train.battery import Protocol, make_subjects, run_task
+    from train.battery.tasks import Protocol, make_subjects, run_task
     model, ablate, kind, s, subjects, task_names, aim, jar_objects, trials = args
     protocol = Protocol(jar_objects=jar_objects, trials=trials)
     ready = {s: make_subjects(model, kind, s, subjects, ablate, protocol)}
@@ -202,7 +202,7 @@ def main(argv=None) -> None:
         png.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         ap.exit(2, f"battery: --out {a.out}: {e}\n")
-    from train.battery import agreement, analyse
+    from train.battery.tasks import agreement, analyse
     t0 = time.perf_counter()
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     conds = conditions(a.models, a.kinds, bool(a.ablate))

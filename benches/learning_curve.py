@@ -45,8 +45,8 @@ from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.progress import Step  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.common.progress import Step  # noqa: E402
 from train import sweep  # noqa: E402
 from train.report import summarise  # noqa: E402
 from cli_args import at_least, count, record_flag, seed  # noqa: E402

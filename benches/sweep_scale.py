@@ -150,7 +150,7 @@ def main():
     a = ap.parse_args()
     import torch
 
-    from train.progress import Step
+    from train.common.progress import Step
     torch.set_num_threads(1)
     cells = cells_of(a.cells)
     print(f"{a.cells} cells (the paper model, a generated set of 8 objects in 8 orders, probes after every "

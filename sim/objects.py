@@ -148,7 +148,7 @@ class ObjectsConfig:
     min_water_depth_cm: float = 2.0
     # objects one life can meet: train (one episode each) plus pool (dropped in goal trials). Not the memory's 230
     # episodes: a memory or hub that forgets when full (MemoryConfig / HubConfig.when_full) runs any length, and the
-    # runner refuses up front only a `refuse` one that is too small (train/run_config.py check_capacity); 2000 bounds a
+    # runner refuses up front only a `refuse` one that is too small (train/runner/settings.py check_capacity); 2000 bounds a
     # file to what one life can simulate (about a second per drop with physics, ~35 min).
     max_objects: int = 2000
 

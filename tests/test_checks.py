@@ -1,6 +1,6 @@
 """Nothing silent, nothing unbounded, no traceback from a config: settings that cannot work together are refused
-before anything is written (train/config_checks.py), a drop that measured nothing true ends the run in one line
-(train.experiment.check_outcome), and every JSON input is read bounded and strict (sim/input_files.py)."""
+before anything is written (train/runner/config_checks.py), a drop that measured nothing true ends the run in one line
+(train.learning.experiment.check_outcome), and every JSON input is read bounded and strict (sim/input_files.py)."""
 
 import json
 import math
@@ -15,8 +15,8 @@ import pytest
 
 from sim.input_files import InputFileError, loads, read_json
 from sim.objects import ObjectsFileError, load_objects
-from train.config import ConfigError, load_toml, resolve
-from train.config_checks import LEVERS_M, check_run
+from train.common.config import ConfigError, load_toml, resolve
+from train.runner.config_checks import LEVERS_M, check_run
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = load_objects(ROOT / "sim" / "default_objects.json")
@@ -104,7 +104,7 @@ def test_a_joint_refusal_names_the_setting_that_was_given():
 def test_the_arms_levers_bound_the_palms_speed():
     """LEVERS_M is a constant (the check must not import the kinematics); it is at least the URDF's."""
     from sim.kinematics import ArmKinematics
-    from train.config_checks import arm_levers
+    from train.runner.config_checks import arm_levers
     levers = arm_levers(ArmKinematics())
     assert 4.0 < levers <= LEVERS_M
 
@@ -116,7 +116,7 @@ def test_the_arms_levers_bound_the_palms_speed():
     ("world.waypoints=100000", "world.waypoints takes an integer (int) from 1 to 1000"),
 ])
 def test_every_amount_of_work_has_an_upper_bound(text, words):
-    from train.config import parse_set
+    from train.common.config import parse_set
     key, value = parse_set(text)
     with pytest.raises(ConfigError) as e:
         resolve({key: value})
@@ -200,8 +200,8 @@ def outcome(**kw):
     ({"observed_cm3": -11013.0}, "negative displaced volume (-11013.0 cm^3"),
 ])
 def test_an_outcome_that_is_no_measurement_is_never_recorded(kw, words):
-    from train.experiment import BadOutcome, outcome_record
-    from train.physics import WorldBuildError
+    from train.learning.experiment import BadOutcome, outcome_record
+    from sim.errors import WorldBuildError
     assert outcome_record(outcome())["observed_cm3"] == 365.0
     with pytest.raises(BadOutcome) as e:
         outcome_record(outcome(**kw))
@@ -219,7 +219,7 @@ def test_an_object_never_delivered_ends_the_run_in_one_line_with_its_checkpoint(
     assert r.returncode == 1 and len(lines) == 1, r.stderr
     assert "'red_heavy_cylinder' was not delivered into the jar" in lines[0] and "is intact" in lines[0]
     assert not (out / "summary.json").exists()
-    from train.checkpoint import load
+    from train.learning.checkpoint import load
     assert load(out / "checkpoints" / "latest.pt")["experiment"]["t"] == 0
 
 
@@ -309,7 +309,7 @@ def test_a_device_as_config_or_objects_is_one_line(tmp_path, capsys):
 # -- summary.json ------------------------------------------------------------------------------------------------
 
 def test_summary_json_has_null_for_non_finite_numbers():
-    from train.summary import json_safe
+    from train.runner.summary import json_safe
     data = json_safe({"a": [1.0, math.nan, (math.inf, -math.inf)], "b": {"c": "\x1b[31m"}, "d": 3})
     assert data == {"a": [1.0, None, [None, None]], "b": {"c": "\x1b[31m"}, "d": 3}
     text = json.dumps(data, allow_nan=False)

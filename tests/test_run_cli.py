@@ -318,7 +318,7 @@ def test_help_states_the_configs_order():
 
 
 def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
-    from train.summary import git_commit
+    from train.runner.summary import git_commit
     objects = tmp_path / "objects.json"
     objects.write_text(json.dumps({"train": [GOOD, obj(name="blue", color="blue")]}))
     cfg = tmp_path / "c.toml"
@@ -394,7 +394,7 @@ def test_ask_names_the_objects_file_it_refuses(tmp_path, capsys):
 def test_a_task_runs_score_says_when_too_few_trials_can_pass():
     """One-sided binomial test at chance 0.5: n of n correct gives p = 0.5 ** n, below 0.05 from n = 5 on; with 2
     trials (p = 0.25 at best) or 4 (0.0625) no score passes, and the line says so instead of "fail"."""
-    from train.task_run import verdict
+    from train.battery.task_run import verdict
     assert verdict(False, 2, 0.5) == verdict(False, 4, 0.5) == " (too few trials to pass at 0.05)"
     assert verdict(False, 5, 0.5) == " -> fail" and verdict(True, 5, 0.5) == " -> pass"
     assert verdict(False, 3, 1 / 3) == " -> fail"    # (1/3) ** 3 = 0.037: 3 of 3 would pass

@@ -125,7 +125,7 @@ def test_a_pool_whose_idle_process_was_killed_still_ends():
     # the idle process of the figure's pool holds the task queue's lock while it waits: Pool.terminate, waiting on that
     # lock, hung for ever once it was killed (and so did a Ctrl-C after it)
     code = ("import os, signal\n"
-            "from train.drawing import Drawer\n"
+            "from train.runner.figure_process import Drawer\n"
             "d = Drawer()\n"
             "pid = d.draw('os:getpid').get()\n"
             "os.kill(pid, signal.SIGKILL)\n"
@@ -183,7 +183,7 @@ def test_a_pool_whose_dead_process_the_pool_thread_saw_still_ends():
     # (never a new process) in its place, which Pool.join then waited on: AttributeError, the tests' pool closed badly
     import time
 
-    from train.physics import QuietPool, end_pool, quiet_pool
+    from train.learning.sim_pool import QuietPool, end_pool, quiet_pool
     pool = quiet_pool(2, None, what="a test worker")
     try:
         victim = pool.processes[0]
@@ -272,7 +272,7 @@ def test_a_pool_dropped_with_a_killed_idle_process_does_not_hang_in_its_finalise
     # the pool's finaliser (run when the pool is dropped, or at exit) waited for ever on the task queue's lock, which
     # the killed idle process held: a runner ended by a signal while it ended its pools hung so after its one line
     code = ("import gc, os, signal, time\n"
-            "from train.physics import quiet_pool\n"
+            "from train.learning.sim_pool import quiet_pool\n"
             "pool = quiet_pool(1, None)\n"
             "pid = pool.apply_async(os.getpid).get(10)\n"
             "time.sleep(0.2)\n"   # back at its wait for the next job, holding the task queue's lock
@@ -289,7 +289,7 @@ def test_signals_held_defers_a_signal_to_the_end_of_the_block_and_raises_it_once
     # Ctrl-C's handler first: a shell's background job starts with SIGINT ignored, and Python then installs none
     code = ("import os, signal\n"
             "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-            "from train.endings import Ended, ending_signals, signals_held\n"
+            "from train.common.exits import Ended, ending_signals, signals_held\n"
             "with ending_signals():\n"
             "    try:\n"
             "        with signals_held():\n"

@@ -12,7 +12,7 @@ from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects
 from sim.oracle import truth
 from sim.sensor_model import SensorModel
 from sim.world import World
-from train.experiment import closed_form_outcomes
+from train.learning.experiment import closed_form_outcomes
 
 MODEL = SensorModel()
 OBJECTS = [  # (spec, orientation as euler xyz): each shape, a turned box and one on its side, small and large
@@ -97,7 +97,7 @@ def test_a_light_object_is_never_felt_below_the_floor_and_the_agent_stores_it():
     from aesop_torch.agent import Agent, AgentConfig
     from sim.objects import ObjectsConfig
     from sim.world import WorldConfig
-    from train.experiment import stack_measurements
+    from train.learning.experiment import stack_measurements
     model = SensorModel(mass_sd_g=5.0)
     floor = model.min_felt_mass_g
     assert floor == WorldConfig().min_felt_mass_g == ObjectsConfig().min_mass_g > 0

@@ -200,7 +200,7 @@ overrides = { rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8 }
 
 
 def test_overrides_reach_the_agent_and_the_rows(tmp_path):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     spec, cells = sweep.load_sweep(_write(tmp_path, OVERRIDDEN))
     cond = spec["conditions"][2]
     assert cond["overrides"] == {"recall_sharpness": 8, "rules.uncertain_decay": 1.0}   # nested or dotted: one form
@@ -223,7 +223,7 @@ def test_overrides_reach_the_agent_and_the_rows(tmp_path):
     ('model = "extended"', "overrides: 'model' is set by the condition's model"),
 ])
 def test_a_bad_override_is_refused_in_one_line(tmp_path, capsys, override, words):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     path = _write(tmp_path, OVERRIDDEN.replace('rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8', override))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
@@ -246,7 +246,7 @@ orders = 2
 
 @pytest.mark.parametrize("policy", ["forget_oldest", "forget_weakest"])
 def test_eight_objects_through_a_memory_and_hub_of_four_run_to_the_end(tmp_path, policy):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     _, (cell,) = sweep.load_sweep(_write(tmp_path, SMALL_MEMORY.replace("POLICY", policy)))
     cfg = sweep.agent_config(cell["spec"]["condition"], 3, 8)
     assert (cfg.memory.max_episodes, cfg.hub.max_assemblies, cfg.memory.when_full) == (4, 4, policy)
@@ -257,7 +257,7 @@ def test_eight_objects_through_a_memory_and_hub_of_four_run_to_the_end(tmp_path,
 
 @pytest.mark.parametrize("part", ["memory", "hub"])
 def test_a_refusing_memory_or_hub_too_small_for_the_set_is_refused_before_anything_is_written(tmp_path, capsys, part):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     other = {"memory": "hub", "hub": "memory"}[part]
     text = SMALL_MEMORY.replace(f'"{part}.when_full" = "POLICY"', f'"{part}.when_full" = "refuse"')
     path = _write(tmp_path, text.replace("POLICY", "forget_oldest"))
@@ -349,11 +349,10 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
 def test_the_constants_kept_without_torch_are_the_agents():
     from aesop_torch.agent import ABLATIONS, MODELS
     from aesop_torch.encoders import OBJECT_PROPERTIES
-    from aesop_torch.rules import RULE_NAMES
-    from train.summary import KNOWLEDGE_LETTERS
+    from aesop_torch.rules import KNOWLEDGE_LETTERS, RULE_NAMES, STATES
     assert sweep.MODELS == MODELS and sweep.ABLATIONS == ABLATIONS
     assert sweep.PROPERTY_COLUMNS == OBJECT_PROPERTIES and sweep.RULE_LETTERS == "".join(RULE_NAMES)
-    assert sweep.KNOWLEDGE_LETTERS == KNOWLEDGE_LETTERS
+    assert len(set(KNOWLEDGE_LETTERS)) == len(KNOWLEDGE_LETTERS) == len(STATES)   # one letter per state, one table
 
 
 def test_the_example_in_docs_and_the_shipped_sweep_files_load():
@@ -361,8 +360,8 @@ def test_the_example_in_docs_and_the_shipped_sweep_files_load():
     text = (ROOT / "docs" / "sweeps.md").read_text()
     doc = tomllib.loads(text.split("```toml\n")[1].split("```")[0])
     try:
-        import train.config  # noqa: F401
-    except ModuleNotFoundError:   # overrides need train/config.py
+        import train.common.config  # noqa: F401
+    except ModuleNotFoundError:   # overrides need train/common/config.py
         for c in doc["conditions"]:
             c.pop("overrides", None)
     spec, cells = sweep._resolve(doc, ROOT / "docs")

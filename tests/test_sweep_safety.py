@@ -188,7 +188,7 @@ def test_the_config_column_names_the_resolved_configs(finished, tmp_path):
     assert "seed" not in rec["agent"] and rec["agent"]["memory"]["max_episodes"] == 4
     assert rec["world"] == {"name": "closed_form", "sensor": rec["world"]["sensor"], "reachable_above_cm3": 200.0}
     assert rec["world"]["sensor"]["mass_sd_g"] > 0
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     _, other = sweep.load_sweep(_write(tmp_path, TINY.replace('ablate = ["rules"]',
                                                                 'overrides = { "rules.uncertain_decay" = 1.0 }')))
     rec2 = sweep.config_record(next(c for c in other if c["spec"]["condition"]["name"] == "paper -rules")["spec"])

@@ -321,7 +321,7 @@ def test_an_episode_that_fails_in_a_non_default_world_is_one_error_naming_it():
     what it raises (a bug there keeps its traceback)."""
     from dataclasses import replace
 
-    from train.physics import WorldBuildError
+    from sim.errors import WorldBuildError
     config = WorldConfig(camera=replace(WorldConfig().camera, min_pixels=10 ** 6))
     w = World(load_objects(DEFAULT_OBJECTS_FILE), config, seed=0)
     try:

@@ -5,7 +5,7 @@
                         [--model paper|extended] [--ablate rules|gating|prior ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
-The model's and the world's config (train/config.py): the defaults, then the --config file, then each --set in
+The model's and the world's config (train/common/config.py): the defaults, then the --config file, then each --set in
 order, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed): a later value wins, so a
 flag wins over the file.
 
@@ -29,12 +29,12 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 # Only light imports up here: torch takes about a second to import; everything the first line needs is checked
-# without it. The parts: train/run_config.py (the settings and the config), train/out_dir.py (--out, its lock),
-# train/endings.py (signals, the one line, exit codes), train/run_loop.py (the run itself).
-from train.endings import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
+# without it. The parts: train/runner/settings.py (the settings and the config), train/runner/out_dir.py (--out, its lock),
+# train/common/exits.py (signals, the one line, exit codes), train/runner/loop.py (the run itself).
+from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
                            sigint_ignored)
-from train.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.run_config import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
+from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
+from train.runner.settings import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
                               adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
                               load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
@@ -125,7 +125,7 @@ def main(argv=None) -> int:
 
 
 def _main(argv=None) -> int:
-    from train import run_loop
+    from train.runner import loop as run_loop
 
     ran = None   # the run's exit code once it has returned
     try:
@@ -145,7 +145,7 @@ def _main(argv=None) -> int:
             print(f"train/run.py: {'resuming' if args.resume else 'starting'} {n_orders:,} order(s) of "
                   f"{len(objects.train)} object(s), physics {args.physics}, seed {args.seed} -> {args.out}",
                   flush=True)
-            from train.physics import Physics
+            from train.learning.sim_pool import Physics
             run_loop._OPEN["physics"] = physics = Physics(objects, seed=args.seed, gui=args.gui,
                                                           **world_kw(args))   # forked in prepare
             exp, resumed, lock = run_loop.prepare(args, objects, n_orders, physics)
@@ -172,13 +172,13 @@ def _main(argv=None) -> int:
 
 
 def _is_task_file(path: Path) -> bool:
-    from train.task_run import is_task_file
+    from train.battery.task_run import is_task_file
     return is_task_file(path)
 
 
 def run_task(args) -> int:
     """--objects is a task file of the Aesop battery (sim/tasks/): --orders N agents of --seed explore and play it in
-    the apparatus built in pybullet (train/task_run.py). It has no checkpoints: an interrupted task run starts again."""
+    the apparatus built in pybullet (train/battery/task_run.py). It has no checkpoints: an interrupted task run starts again."""
     given = [flag for flag, on in (("--resume", args.resume), ("--config/--set", args.overrides.keys() -
                                                                      {"model", "ablate", "seed"}),
                                    ("--gui", args.gui), ("--physics per-episode", args.physics != "cached")) if on]
@@ -197,7 +197,7 @@ def run_task(args) -> int:
           f"physics in pybullet -> {args.out}", flush=True)
     lock = lock_out(args.out)
     try:
-        from train.task_run import run_task_file
+        from train.battery.task_run import run_task_file
         try:
             run_task_file(task, args.out, args.model, args.seed, int(args.orders), tuple(args.ablate), args.frames)
         except OSError as e:
@@ -214,5 +214,11 @@ def run_task(args) -> int:
         os.close(lock)
 
 
+def console_main() -> None:
+    """`python train/run.py` and the console command aesop-run: the run, then its exit without the interpreter's
+    teardown (everything is written and closed; train/common/exits.py exit_now)."""
+    exit_now(main())
+
+
 if __name__ == "__main__":
-    exit_now(main())   # everything is written and closed: spare the interpreter's teardown (train/endings.py)
+    console_main()

@@ -47,7 +47,7 @@ FORMAT = 3               # in every cell's hash: bumped when the rows a spec giv
                          # stored, recalled, probe_errors, probe_floors; 3: config)
 BATCH_MAX_TRAIN = 500    # the batch answer compares every pair of a set's train objects: up to this many
 WORLDS = ("closed_form", "closed_form_exact", "physics")
-from train.run_config import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables, torch-free
+from train.runner.settings import ABLATIONS, MODELS, check_capacity  # noqa: E402   the runner's tables, torch-free
 MAX_CELLS = 1_000_000
 MAX_SEEDS = 1_000_000    # seeds of one range
 MAX_ORDERS = 100_000     # orders of one cell (one batched agent)
@@ -57,7 +57,6 @@ MAX_SWEEP_BYTES = 1_000_000     # a sweep file: the shipped ones are under 2 kB 
 MAX_RECORD_BYTES = 1 << 30      # DIR/sweep.json and DIR/configs.json as this program writes them (the largest
                                 # legal sweep, 1,000,000 cells, records well under this; see docs/sweeps.md)
 MAX_NESTING = 16                # tables and lists in tables: the shipped sweep files nest 5 deep
-KNOWLEDGE_LETTERS = "ULDI"   # train.summary.KNOWLEDGE_LETTERS: one per aesop_torch.rules.STATES code
 RULE_LETTERS = "SEGU"        # aesop_torch.rules.RULE_NAMES
 # aesop_torch.encoders.OBJECT_PROPERTIES: a model has the paper's four or the split five (null in the others)
 PROPERTY_COLUMNS = ("color", "shape", "fill", "elongation", "size", "weight")
@@ -145,7 +144,7 @@ def _seeds(v, where: str) -> list[int]:
 
 
 def _orders(v, where: str, n_train: int) -> str:
-    """As train.experiment.draw_orders takes it: 'N', 'listed' or 'all'."""
+    """As train.learning.experiment.draw_orders takes it: 'N', 'listed' or 'all'."""
     if v in ("listed", "all"):
         if v == "all" and math.factorial(n_train) > 40_320:
             raise SweepError(f"{where}: 'all' orders of {n_train} objects are {math.factorial(n_train):,} "
@@ -191,7 +190,7 @@ def agent_config(condition: dict, seed: int, n_train: int):
     cfg = AgentConfig.named(condition["model"], ablate=tuple(condition["ablate"]), seed=seed)
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     if condition["overrides"]:
-        from train.config import apply_overrides
+        from train.common.config import apply_overrides
         cfg = apply_overrides(cfg, condition["overrides"])
     return cfg
 
@@ -224,9 +223,9 @@ def _condition(c, where: str, names: set) -> dict:
             raise SweepError(f"{where}: overrides: {key!r} is set by {why}, not by an override")
     if cond["overrides"]:
         try:
-            from train.config import ConfigError
+            from train.common.config import ConfigError
         except ImportError:
-            raise SweepError(f"{where}: overrides need train/config.py, which this checkout lacks") from None
+            raise SweepError(f"{where}: overrides need train/common/config.py, which this checkout lacks") from None
         try:
             agent_config(cond, 0, 8)
         except (ConfigError, ValueError, TypeError) as e:
@@ -436,18 +435,18 @@ def objects_of(cell: dict, objects: dict | None):
 
 
 def world_outcomes(cell: dict, objects: dict | None) -> tuple[dict, dict]:
-    """(outcomes, probes) as train.experiment.closed_form_outcomes gives them, in the cell's world: the closed form
+    """(outcomes, probes) as train.learning.experiment.closed_form_outcomes gives them, in the cell's world: the closed form
     with the simulated robot's noise (closed_form), without noise (closed_form_exact), or the pybullet world, each
     distinct train object dropped once and each probe inspected once (physics: the jar is reset between episodes,
     so an object's outcome does not depend on the order it comes in; train/run.py's cached physics)."""
-    from train.experiment import closed_form_outcomes, outcome_record, plain_measurement
+    from train.learning.experiment import closed_form_outcomes, outcome_record, plain_measurement
     objs, seed = objects_of(cell, objects), cell["seed"]
     if cell["world"] != "physics":
         from sim.sensor_model import SensorModel
         return closed_form_outcomes(objs, reachable_above_cm3=_REACH_CM3,
                                     sensor=SensorModel() if cell["world"] == "closed_form" else None, seed=seed)
     from sim.objects import archimedes_cm3
-    from train.physics import Physics
+    from train.learning.sim_pool import Physics
     physics = Physics(objs, seed=seed, workers=1)   # in this process: a cell is one core's work
     try:
         jobs = [("drop", o.name, False) for o in objs.train] + [("inspect", o.name, None) for o in objs.probe]
@@ -533,7 +532,8 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
     import torch
 
     from aesop_torch.agent import Agent
-    from train.experiment import draw_orders, one_thread, stack_measurements
+    from aesop_torch.rules import KNOWLEDGE_LETTERS
+    from train.learning.experiment import draw_orders, one_thread, stack_measurements
 
     with one_thread(), torch.no_grad():
         objs = objects_of(cell, objects)
@@ -1009,7 +1009,7 @@ def start_ray(address: str | None, workers: int | None) -> bool:
             sys.stderr.write(text)
             sys.stderr.flush()
         return True
-    from train.physics import cores
+    from train.learning.sim_pool import cores
     # "local": a new instance of this process's own, even where a cluster runs (ray.init() would join that)
     ray.init(address="local", num_cpus=workers or cores(), include_dashboard=False, log_to_driver=False,
              logging_level=logging.ERROR, job_config=job)
@@ -1156,7 +1156,7 @@ def _ending_signals():
 
 
 # a second Ctrl-C (or SIGTERM, SIGHUP) must not interrupt the clean-up after the first: the runner's guard
-from train.endings import sigint_ignored as _quiet  # noqa: E402
+from train.common.exits import sigint_ignored as _quiet  # noqa: E402
 
 
 def _how(e: KeyboardInterrupt) -> tuple[str, int]:

@@ -6,7 +6,7 @@ A key is a dotted path of dataclass fields, the same everywhere (`--set`, the TO
 * the agent's config, `aesop_torch.agent.AgentConfig`: its own fields at the top level (`recall_sharpness`,
   `compare_with`, `model`, `ablate`, `seed`, ...) and its parts by name (`encoder.`, `hub.`, `memory.`, `rules.`);
 * the world's config under `world.`: `sim.world.WorldConfig`, the pybullet scene every physics worker of the runner
-  builds (`World(objects, config, seed)`, train/physics.py), with its parts `world.tank.` (`sim.water.TankConfig`:
+  builds (`World(objects, config, seed)`, train/learning/sim_pool.py), with its parts `world.tank.` (`sim.water.TankConfig`:
   jar, ball, stepping), `world.tank.water.` (`WaterConfig`), `world.robot.` (`sim.robot.RobotConfig`), `world.ik.`
   (`sim.kinematics.IKConfig`) and `world.camera.` (`sim.perception.CameraConfig`); e.g. `world.mass_noise_g`, the
   wrist's noise on the felt mass. The runner builds no other world config: `sim.sensor_model.SensorModel` serves
@@ -144,7 +144,7 @@ RANGES = {
     "world.robot.velocity_gain": NON_NEGATIVE, "world.robot.max_velocity": POSITIVE,
     # counts of steps, iterations, points, pixels, waypoints that something is divided by, averaged or stepped over;
     # each bounded where more is only more work: a wait of the simulator at most 240,000 steps (1000 s of simulated
-    # time, train/config_checks.py WAIT_STEPS); pybullet's solver converges in its default 50 iterations; 60 IK
+    # time, train/runner/config_checks.py WAIT_STEPS); pybullet's solver converges in its default 50 iterations; 60 IK
     # iterations solve every target the bench box reaches (sim/kinematics.py); the level's Newton iterations reach
     # its 0.1 nm tolerance in a handful (30 by default); 1000 waypoints are 0.3 mm apart on the 31 cm carry; a render
     # costs ~20 ms at 256 px and 64x that at 2048; 4096 points already sample a body's volume to 0.5 % (16x that)
@@ -160,7 +160,7 @@ RANGES = {
     # the jar's round wall is a polygon of this many staves (pybullet builds 16 to a link; 256 make the polygon's
     # area within 0.01 % of the circle's)
     "world.tank.staves": (3, True, 256),
-    # the run's seed (the agent's is the run's: train.experiment sets it)
+    # the run's seed (the agent's is the run's: train.learning.experiment sets it)
     "seed": (0, True, MAX_SEED - 1),
 }
 

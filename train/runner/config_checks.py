@@ -1,7 +1,7 @@
 """Settings that are each in range but together cannot give a run its result, refused before anything is written.
 
-train.config checks each key alone (its type, its RANGES); sim.world.World and sim.water.Tank refuse a scene they
-cannot build (train.config.check_world). What is left is settings that build a world which then measures nothing,
+train.common.config checks each key alone (its type, its RANGES); sim.world.World and sim.water.Tank refuse a scene they
+cannot build (train.common.config.check_world). What is left is settings that build a world which then measures nothing,
 or the wrong thing, or runs for ever:
 
 - the jar or the stand off the table, or through each other;
@@ -16,7 +16,7 @@ or the wrong thing, or runs for ever:
   together);
 - a wait of the simulator (a move, a settle) longer than WAIT_STEPS steps: hours of stepping, not a result.
 
-`check_run(run_config, objects)` raises train.config.ConfigError: one line naming every setting involved (and the
+`check_run(run_config, objects)` raises train.common.config.ConfigError: one line naming every setting involved (and the
 object, where one decides it), `key` the first of them, the one the runner names the origin of.
 """
 
@@ -25,7 +25,7 @@ from __future__ import annotations
 import functools
 import math
 
-from train.config import ConfigError
+from train.common.config import ConfigError
 
 # the longest wait of the simulator: 1000 s of simulated time at pybullet's default 1/240 s step, 100x the default
 # settle timeout and 250x the default move timeout; a step of the default scene with an object out took 0.6 ms
@@ -46,10 +46,10 @@ ENCODER_MARGIN = 0.5
 
 
 def check_run(config, objects, given=()) -> None:
-    """Every check of this module on a resolved train.config.RunConfig and the run's ObjectSet; ConfigError. `given`:
+    """Every check of this module on a resolved train.common.config.RunConfig and the run's ObjectSet; ConfigError. `given`:
     the keys the run set (its overrides); a refusal that names several settings takes as its `key` the first of
     them that was given, so that the runner says where it came from."""
-    from train.config import check_world
+    from train.common.config import check_world
     check_world(config.world, objects)
     world = config.world
     try:

@@ -1,5 +1,5 @@
 """A run's settings from its flags: --orders and --seed as given, the config from --config, --set, --model, --ablate
-and --seed (train/config.py), a resumed run's own settings from DIR/run.json, the objects, and every check of them
+and --seed (train/common/config.py), a resumed run's own settings from DIR/run.json, the objects, and every check of them
 that needs no simulation.
 
 The config's overrides apply in order, a later value of a key replacing an earlier one: the --config file, each --set
@@ -16,10 +16,10 @@ import copy
 import re
 from pathlib import Path
 
-from train.endings import UsageError
-from train.out_dir import CONFIG_NAME, RUN_NAME
+from train.common.exits import UsageError
+from train.runner.out_dir import CONFIG_NAME, RUN_NAME
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OBJECTS = ROOT / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
@@ -53,7 +53,7 @@ def gather_config(a) -> None:
     a.overrides {dotted key: value}, where each came from as a.origins {key: "--set k=v" | "--config FILE" | flag},
     and the run-level keys resolved into a.model, a.ablate, a.seed. Torch-free: the syntax, the file and these three
     keys are checked here; every other key against the dataclasses in resolve_config."""
-    from train.config import ConfigError, load_toml, parse_set
+    from train.common.config import ConfigError, load_toml, parse_set
 
     overrides, origins = {}, {}
 
@@ -86,7 +86,7 @@ def gather_config(a) -> None:
 
 def run_level(a) -> None:
     """a.model, a.ablate, a.seed from a.overrides, checked (torch-free)."""
-    from train.config import show
+    from train.common.config import show
 
     overrides, origins = a.overrides, a.origins
     model = overrides.get("model", "paper")
@@ -110,7 +110,7 @@ def adopt_run(a) -> None:
     value. A run from before run.json: the flags as given (the checkpoint's check refuses a mismatch, saying the
     directory holds no run.json)."""
 
-    from train.config import show
+    from train.common.config import show
 
     path = a.out / RUN_NAME
     if path.is_symlink() or not path.is_file():
@@ -194,11 +194,11 @@ def count_orders(n_objects: int, orders: str) -> int:
 
 
 def resolve_config(args, objects):
-    """The run's config (train.config.RunConfig: agent and world) from args.overrides, checked against the
+    """The run's config (train.common.config.RunConfig: agent and world) from args.overrides, checked against the
     dataclasses and against the objects (a world its workers could not build). Imports torch and the simulator.
     UsageError naming where the refused key came from."""
-    from train.config import ConfigError, resolve
-    from train.config_checks import check_run
+    from train.common.config import ConfigError, resolve
+    from train.runner.config_checks import check_run
 
     try:
         config = resolve(args.overrides)
@@ -220,7 +220,7 @@ def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}
     """Why a run of n_train episodes cannot end with this AgentConfig, in one line, or None. A memory or hub whose
     when_full is `refuse` stops the run at its first episode past capacity, maybe hours in: refused before anything
     is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
-    a copy with room for theirs (train/trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
+    a copy with room for theirs (train/learning/goal_trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
     differs)."""
     full = []   # (part, its size's key, the size) of each part that would refuse
     for part, key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
@@ -240,7 +240,7 @@ def world_kw(args) -> dict:
     """Physics' `world` argument: the config's world when it is not the default one (the default needs none, and
     the stand-ins of Physics in tests/test_checkpoint.py take none)."""
     from sim.world import WorldConfig
-    from train.config import config_dict
+    from train.common.config import config_dict
 
     world = args.run_config.world
     return {} if config_dict(world) == config_dict(WorldConfig()) else {"world": world}
@@ -259,7 +259,7 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
 
     from aesop_torch.agent import AgentConfig
     from sim.world import WorldConfig
-    from train.config import config_dict, first_difference, flatten, show
+    from train.common.config import config_dict, first_difference, flatten, show
 
     def refuse(key, here, there):
         raise UsageError(f"--resume: the config's {key} differs from the interrupted run in {args.out} "
@@ -308,7 +308,7 @@ def check_same_run(args, objects, stored_run: dict) -> None:
 
 
 def as_run(agent, n_train: int, seed: int):
-    """A copy of an AgentConfig as train.experiment.Experiment runs it (its __post_init__): the run's seed, the
+    """A copy of an AgentConfig as train.learning.experiment.Experiment runs it (its __post_init__): the run's seed, the
     memory and the hub sized to the train objects."""
     agent = copy.deepcopy(agent)
     agent.seed = seed

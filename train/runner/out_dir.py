@@ -15,7 +15,7 @@ import re
 import stat
 from pathlib import Path
 
-from train.endings import UsageError
+from train.common.exits import UsageError
 
 LOCK_NAME = ".lock"
 CONFIG_NAME = "config.json"   # the run's config, written when it starts (summary.json's `config`)

@@ -1,6 +1,6 @@
 """Every presentation order at once: the final knowledge and probe error of a large population of orders.
 
-`train.experiment.Experiment` runs one agent per order and records every episode; for all 8! = 40,320 orders that
+`train.learning.experiment.Experiment` runs one agent per order and records every episode; for all 8! = 40,320 orders that
 is too slow and too big. Here only the end of each order is kept, and work that orders share is done once:
 
 - Prefix sharing. With the jar reset between episodes an agent's state after t episodes depends only on the first t
@@ -41,8 +41,8 @@ import torch
 
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, Recall
-from train.experiment import stack_measurements
-from train.summary import KNOWLEDGE_LETTERS
+from aesop_torch.rules import KNOWLEDGE_LETTERS
+from train.learning.experiment import stack_measurements
 
 # Sibling trie nodes stepped together. All 40,320 orders of the default set with the plain trie (before states were
 # merged), 2 threads, shared recall cache: 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB
@@ -57,7 +57,7 @@ DEFAULT_THREADS = 1
 
 
 def knowledge_keys(state: torch.Tensor) -> list[str]:
-    """(B, P) rules state codes -> B knowledge keys, the letters train.summary.knowledge_key gives."""
+    """(B, P) rules state codes -> B knowledge keys, the letters train.runner.summary.knowledge_key gives."""
     return ["".join(KNOWLEDGE_LETTERS[c] for c in row) for row in state.tolist()]
 
 
@@ -71,7 +71,7 @@ def agreement(keys: list[str]) -> tuple[str, float, dict]:
 
 
 def median_rel_errors(predicted: torch.Tensor, truth: torch.Tensor) -> list[float | None]:
-    """Row-wise `train.experiment.median_rel_error`, vectorised: (B, n_probes) predictions -> B medians (None where
+    """Row-wise `train.learning.experiment.median_rel_error`, vectorised: (B, n_probes) predictions -> B medians (None where
     no probe can be predicted). Same arithmetic: float32 errors, a NaN prediction counts as 1, the median of an even
     count is the float64 mean of the middle two, as `statistics.median` gives."""
     B, n = predicted.shape
@@ -202,7 +202,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
                    threads: int | None = None, merge: bool = True, curves: bool = False) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
-    orders: lists of indices into train_names, all of length len(train_names) (as train.experiment.draw_orders
+    orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
     gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
@@ -217,7 +217,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}; with curves=True also
     "curves": {"probe_rel_error": per episode, {"values": the distinct errors (rounded as the records), "counts":
     how many orders have each, "none": how many orders cannot predict yet}} (counts, not N numbers per episode:
-    9! orders share a few thousand values; `train.quantiles.weighted_quantiles` reads them).
+    9! orders share a few thousand values; `train.common.quantiles.weighted_quantiles` reads them).
     """
     n, N = len(train_names), len(orders)
     if n == 0 or N == 0:

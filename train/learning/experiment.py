@@ -17,8 +17,8 @@ import torch
 
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.rules import RULE_NAMES
-from train import checkpoint
-from train.physics import WorldBuildError
+from train.learning import checkpoint
+from sim.errors import WorldBuildError
 
 MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
 
@@ -55,7 +55,7 @@ class BadOutcome(WorldBuildError):
 
 
 def check_outcome(outcome) -> None:
-    """Raise BadOutcome (a train.physics.WorldBuildError: the run ends in one line, exit 1, its last checkpoint kept)
+    """Raise BadOutcome (a train.learning.sim_pool.WorldBuildError: the run ends in one line, exit 1, its last checkpoint kept)
     for a drop whose outcome would teach the agent something the world did not do: the object not delivered into
     the jar (the rise read is not its), a measurement that is not finite, or a negative displaced volume (no object
     lowers the water: the level's noise drowned the rise)."""
@@ -166,7 +166,7 @@ class Experiment:
     records: list[list[dict]] = field(default_factory=list)
     outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
     probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
-    # per order, the goal trials' records (train/trials.py), played after the exploration; not checkpointed: they
+    # per order, the goal trials' records (train/learning/goal_trials.py), played after the exploration; not checkpointed: they
     # are a function of the final state
     trials: list = field(default_factory=list)
     # False: the agents' maps are not trained here because a state dict is about to bring them (from_state_dict)
@@ -324,7 +324,7 @@ def one_thread():
 
 
 def load_experiment(path) -> Experiment:
-    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.learning.checkpoint.load), as a live
     Experiment, agents included."""
     with one_thread():   # building a few agents is hundreds of tiny ops: a second thread only waits (see one_thread)
         return Experiment.from_state_dict(checkpoint.load(path)["experiment"])
