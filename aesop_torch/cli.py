@@ -43,8 +43,8 @@ def sweep(argv=None) -> int:
 
 
 def report(argv=None) -> int:
-    """aesop-report: python -m train.report."""
-    return _main("aesop-report", "train.report")(argv)
+    """aesop-report: python -m train.report (its usage line names aesop-report)."""
+    return _main("aesop-report", "train.report")(argv, prog="aesop-report")
 
 
 def ask(argv=None) -> int:

@@ -17,8 +17,13 @@ import pyarrow.parquet as pq
 import pytest
 
 from train import sweep
+from train.common import exits
+from train.sweeps import cell as sweep_cell
+from train.sweeps import cluster, provenance, store
+from train.sweeps import spec as sweep_spec
 
 ROOT = Path(__file__).resolve().parents[1]
+CLEAN = "0123abc"   # the commit the tests' cells are written at (clean_commit)
 
 TINY = """
 [[conditions]]
@@ -38,6 +43,13 @@ checks = [1, 4]
 """
 
 
+@pytest.fixture(autouse=True)
+def clean_commit(monkeypatch):
+    """This checkout taken for a clean commit, CLEAN: a developer's uncommitted changes would make every --resume
+    here refuse (that refusal has its own tests, which give the commits)."""
+    monkeypatch.setattr(provenance, "commit", lambda: CLEAN)
+
+
 def _write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
     p = tmp_path / name
     p.write_text(text)
@@ -54,13 +66,13 @@ def finished(tmp_path_factory):
     file, its cells (load order) and its DIR, for each test to copy."""
     base = tmp_path_factory.mktemp("finished")
     path = _write(base, TINY)
-    spec, cells = sweep.load_sweep(path)
+    spec, cells = sweep_spec.load_sweep(path)
     out = base / "out"
     (out / "cells").mkdir(parents=True)
-    sweep._write_record(out, {"format": sweep.FORMAT, "sweep_file": str(path), "spec": spec,
+    store.write_record(out, {"format": sweep_spec.FORMAT, "sweep_file": str(path), "spec": spec,
                               "cells": [c["id"] for c in cells], "runs": []})
     for c in cells:
-        sweep.write_cell(out, c["id"], sweep.run_cell(c["spec"], c["objects"]))
+        store.write_cell(out, c["id"], sweep_cell.run_cell(c["spec"], c["objects"], commit=CLEAN))
     return path, cells, out
 
 
@@ -86,7 +98,7 @@ def _damage(kind: str, cells_dir: Path, ids: list[str]) -> str:
         shutil.copyfile(a, b)
         return f"holds the rows of cell {ids[0]}, not {ids[1]} (renamed?)"
     if kind == "corrupt":   # the last byte of the observed_cm3 column's data page flipped: its CRC no longer matches
-        col = pq.read_metadata(b).row_group(0).column(sweep.schema().names.index("observed_cm3"))
+        col = pq.read_metadata(b).row_group(0).column(sweep_cell.schema().names.index("observed_cm3"))
         end = (col.dictionary_page_offset if col.has_dictionary_page else col.data_page_offset) + \
             col.total_compressed_size
         flipped = bytearray(data)
@@ -96,7 +108,7 @@ def _damage(kind: str, cells_dir: Path, ids: list[str]) -> str:
     if kind == "rows of another cell":   # the cell column says B, the rows are A's (another condition)
         t = pq.read_table(a)
         t = t.set_column(0, "cell", pa.array([ids[1]] * t.num_rows, pa.string()))
-        b.write_bytes(sweep.encode_cell(t.replace_schema_metadata(None)))
+        b.write_bytes(store.encode_cell(t.replace_schema_metadata(None)))
         return "its rows' condition is paper -rules, not this cell's paper"
     raise AssertionError(kind)
 
@@ -109,7 +121,7 @@ def test_a_damaged_cell_file_is_not_counted_finished(finished, tmp_path, kind):
     pr = next(c for c in cells if c["spec"]["condition"]["name"] == "paper -rules")
     p = next(c for c in cells if c["spec"]["condition"]["name"] == "paper" and c["spec"]["seed"] == pr["spec"]["seed"])
     words = _damage(kind, out / "cells", [pr["id"], p["id"]])
-    done, foreign, bad = sweep.survey(out, cells)
+    done, foreign, bad = store.survey(out, cells)
     assert done == {c["id"] for c in cells} - {p["id"]} and foreign == []
     assert [(q.name, why) for q, why in bad] == [(f"{p['id']}.parquet", bad[0][1])] and words in bad[0][1], bad
 
@@ -120,7 +132,7 @@ def test_a_foreign_file_is_reported_and_never_counted(finished, tmp_path):
     shutil.copyfile(out / "cells" / f"{cells[0]['id']}.parquet", out / "cells" / "0123456789abcdef.parquet")
     (out / "cells" / "notes.txt").write_text("mine")
     (out / "cells" / f".{cells[0]['id']}.parquet.x1.tmp").write_bytes(b"half")   # a killed write's temporary file
-    done, foreign, bad = sweep.survey(out, cells)
+    done, foreign, bad = store.survey(out, cells)
     assert done == {c["id"] for c in cells} and bad == []
     assert foreign == ["0123456789abcdef.parquet", "notes.txt"]
 
@@ -130,7 +142,7 @@ def test_resume_reruns_damaged_cells_and_records_where_the_rows_came_from(finish
     alone; the table is then the cells' own rows, and sweep.json and each file say how and where they were made."""
     path, cells, _ = finished
     out = _copy(finished, tmp_path)
-    want = _sorted(sweep.read_cells(out))
+    want = _sorted(store.read_cells(out))
     d = out / "cells"
     ids = [c["id"] for c in cells]
     shutil.copyfile(d / f"{ids[0]}.parquet", d / f"{ids[1]}.parquet")                    # swapped
@@ -151,8 +163,8 @@ def test_resume_reruns_damaged_cells_and_records_where_the_rows_came_from(finish
     assert "1 on disk, 3 to run" in captured.out
     assert sorted(p.name for p in d.iterdir()) == sorted(
         [f"{i}.parquet" for i in ids] + [f"{i}.parquet.rejected" for i in ids[1:]] + ["feedfacefeedface.parquet"])
-    assert _sorted(sweep.read_cells(out, ids)).equals(want)
-    assert sweep.survey(out, cells)[0] == set(ids)
+    assert _sorted(store.read_cells(out, ids)).equals(want)
+    assert store.survey(out, cells)[0] == set(ids)
 
     # provenance: this run's entry in sweep.json, the cells it ran with their host and wall time
     record = json.loads((out / "sweep.json").read_text())
@@ -161,20 +173,20 @@ def test_resume_reruns_damaged_cells_and_records_where_the_rows_came_from(finish
     assert run["resumed"] is True and run["ended_by"] == "finished" and run["cells_run"] == 3
     assert run["started"] <= run["ended"] and run["ended"].endswith("Z") and len(run["started"]) == 20
     assert set(run["versions"]) == {"python", "torch", "numpy", "pybullet", "pyarrow", "ray"}
-    assert run["versions"]["pyarrow"] == pa.__version__ and run["commit"] == sweep.commit()
+    assert run["versions"]["pyarrow"] == pa.__version__ and run["commit"] == provenance.commit()
     assert set(run["cells"]) == set(ids[1:])
     host = socket.gethostname()
     assert all(v["host"] == host and v["wall_s"] > 0 for v in run["cells"].values())
     # ... and in each file it wrote, with the config it ran: its hash in every row, the config in configs.json
     configs = json.loads((out / "configs.json").read_text())
     for i in ids[1:]:
-        info = sweep.cell_info(d / f"{i}.parquet")
+        info = store.cell_info(d / f"{i}.parquet")
         assert info["cell"] == i and info["commit"] == run["commit"] and info["host"] == host
         assert info["wall_s"] == run["cells"][i]["wall_s"] and info["versions"] == run["versions"]
         rows = pq.read_table(d / f"{i}.parquet", columns=["config"]).column("config").unique().to_pylist()
         assert rows == [info["config"]] and configs[info["config"]] == info["config_record"]
-        assert sweep.config_hash(configs[info["config"]]) == info["config"]
-    assert sweep.cell_info(d / f"{ids[0]}.parquet") == {}   # written by the fixture, without provenance
+        assert sweep_cell.config_hash(configs[info["config"]]) == info["config"]
+    assert store.cell_info(d / f"{ids[0]}.parquet") == {}   # written by the fixture, without provenance
 
 
 def test_the_config_column_names_the_resolved_configs(finished, tmp_path):
@@ -182,17 +194,17 @@ def test_the_config_column_names_the_resolved_configs(finished, tmp_path):
     _, cells, _ = finished
     by_cond = {}
     for c in cells:
-        by_cond.setdefault(c["spec"]["condition"]["name"], set()).add(sweep.config_hash(sweep.config_record(c["spec"])))
+        by_cond.setdefault(c["spec"]["condition"]["name"], set()).add(sweep_cell.config_hash(sweep_cell.config_record(c["spec"])))
     assert len(by_cond["paper"]) == len(by_cond["paper -rules"]) == 1 and by_cond["paper"] != by_cond["paper -rules"]
-    rec = sweep.config_record(cells[0]["spec"])
+    rec = sweep_cell.config_record(cells[0]["spec"])
     assert "seed" not in rec["agent"] and rec["agent"]["memory"]["max_episodes"] == 4
     assert rec["world"] == {"name": "closed_form", "sensor": rec["world"]["sensor"], "reachable_above_cm3": 200.0}
     assert rec["world"]["sensor"]["mass_sd_g"] > 0
     pytest.importorskip("train.common.config")
-    _, other = sweep.load_sweep(_write(tmp_path, TINY.replace('ablate = ["rules"]',
+    _, other = sweep_spec.load_sweep(_write(tmp_path, TINY.replace('ablate = ["rules"]',
                                                                 'overrides = { "rules.uncertain_decay" = 1.0 }')))
-    rec2 = sweep.config_record(next(c for c in other if c["spec"]["condition"]["name"] == "paper -rules")["spec"])
-    assert rec2["agent"]["rules"]["uncertain_decay"] == 1.0 and sweep.config_hash(rec2) not in by_cond["paper"]
+    rec2 = sweep_cell.config_record(next(c for c in other if c["spec"]["condition"]["name"] == "paper -rules")["spec"])
+    assert rec2["agent"]["rules"]["uncertain_decay"] == 1.0 and sweep_cell.config_hash(rec2) not in by_cond["paper"]
 
 
 # -- 2. links inside DIR --------------------------------------------------------------------------------------------
@@ -258,7 +270,7 @@ def test_sigterm_ends_a_sweep_as_ctrl_c(tmp_path):
     assert p.returncode == 143 and lines == [
         f"train/sweep.py: interrupted by SIGTERM: {len(done)} of 80 cell(s) on disk in {out / 'cells'} "
         f"(--resume runs the rest)"], stderr
-    assert 1 <= len(done) < 80 and sweep.read_cells(out).num_rows == len(done) * 2 * 4
+    assert 1 <= len(done) < 80 and store.read_cells(out).num_rows == len(done) * 2 * 4
     run = json.loads((out / "sweep.json").read_text())["runs"][-1]
     assert run["ended_by"] == "interrupted by SIGTERM" and run["cells_run"] == len(done)
 
@@ -273,7 +285,7 @@ def test_sighup_ends_a_sweep_as_ctrl_c(finished, tmp_path, local_ray, capsys):
     assert [x for x in capsys.readouterr().err.splitlines() if not x.startswith("cells: ")] == [
         f"train/sweep.py: interrupted by SIGHUP: 1 of 4 cell(s) on disk in {out / 'cells'} (--resume runs the rest)"]
     assert json.loads((out / "sweep.json").read_text())["runs"][-1]["ended_by"] == "interrupted by SIGHUP"
-    assert signal.getsignal(signal.SIGHUP) is not sweep._ended   # the handlers before main() are back
+    assert signal.getsignal(signal.SIGHUP) is not exits._ended   # the handlers before main() are back
 
 
 # -- 4. the sweep file ----------------------------------------------------------------------------------------------
@@ -299,7 +311,7 @@ def test_a_sweep_file_that_is_a_device_or_a_fifo_is_refused_at_once(tmp_path):
 
 
 def test_a_sweep_file_larger_than_the_limit_is_not_read(tmp_path, capsys):
-    path = _write(tmp_path, "# " + "x" * sweep.MAX_SWEEP_BYTES + "\n" + TINY)
+    path = _write(tmp_path, "# " + "x" * sweep_spec.MAX_SWEEP_BYTES + "\n" + TINY)
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
     assert capsys.readouterr().err.splitlines() == [
         f"train/sweep.py: error: {path}: larger than 1,000,000 bytes, too large for a sweep file"]
@@ -389,14 +401,14 @@ def test_a_cluster_that_refuses_the_sweep_without_a_token_is_named_in_one_line(f
 def test_a_refused_authentication_is_named_with_its_fix():
     import ray
     auth = ray.exceptions.AuthenticationError("Authentication failed: UNAUTHENTICATED")
-    assert sweep._join_failure("10.0.0.5:6379", auth, "") == (
+    assert cluster._join_failure("10.0.0.5:6379", auth, "") == (
         "cannot join Ray at 10.0.0.5:6379: the cluster requires token authentication: set RAY_AUTH_MODE=token (and its "
         "token: RAY_AUTH_TOKEN or ~/.ray/auth_token) and run the sweep again")
     # the gRPC lines Ray printed while it retried say so, when its exception does not
     said = "E1206 rpc_client.h:212] Failed to connect to GCS: UNAUTHENTICATED: Invalid or missing token\n" * 20
-    line = sweep._join_failure("10.0.0.5:6379", ConnectionError("Could not connect to the GCS"), said)
+    line = cluster._join_failure("10.0.0.5:6379", ConnectionError("Could not connect to the GCS"), said)
     assert "\n" not in line and "RAY_AUTH_MODE=token" in line and "10.0.0.5:6379" in line
-    other = sweep._join_failure("10.0.0.5:6379", RuntimeError("Version mismatch: 2.9 and 2.60\nmore"), "")
+    other = cluster._join_failure("10.0.0.5:6379", RuntimeError("Version mismatch: 2.9 and 2.60\nmore"), "")
     assert other.startswith("cannot join Ray at 10.0.0.5:6379: Version mismatch: 2.9 and 2.60; ") and "\n" not in other
     assert "RAY_AUTH_MODE=token" in other
 
@@ -413,14 +425,14 @@ def test_the_docs_python_example_runs_on_a_tiny_sweeps_output(tmp_path, local_ra
     assert len(blocks) == 1 and 'DIR = "runs/sweep-tiny"\n' in blocks[0] and "pandas" not in blocks[0]
     exec(compile(blocks[0].replace('DIR = "runs/sweep-tiny"', f"DIR = {str(out)!r}"), "docs/sweeps.md", "exec"), {})
     lines = capsys.readouterr().out.splitlines()
-    rows = sweep.read_cells(out)
+    rows = store.read_cells(out)
     final = [r for r in rows.to_pylist() if r["episode"] == r["n_train"]]
     assert lines[:len(final)] == [f"{r['condition']} {r['set']} {r['seed']} {r['order']} {r['knowledge']}"
                                   for r in final]
     at4 = [r["probe_rel_error"] for r in final if r["condition"] == "paper"]
     assert f"paper: after 4 episodes, 4 runs, mean error {100 * sum(at4) / 4:.1f} %" in lines
     assert lines[-1].startswith(json.loads((out / "sweep.json").read_text())["runs"][0]["started"] + " ")
-    assert lines[-1].endswith(" finished " + sweep.commit() + " " + sweep.versions()["torch"])
+    assert lines[-1].endswith(" finished " + provenance.commit() + " " + provenance.versions()["torch"])
 
 
 @pytest.mark.parametrize("content, words", [
