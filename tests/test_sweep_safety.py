@@ -2,6 +2,7 @@
 --resume, links inside DIR, a sweep file that is no bounded regular file, SIGTERM and SIGHUP, a cluster it cannot
 join; and it records where its rows came from (commit, libraries, times, hosts, the resolved configs)."""
 
+import contextlib
 import json
 import os
 import shutil
@@ -273,6 +274,99 @@ def test_sigterm_ends_a_sweep_as_ctrl_c(tmp_path):
     assert 1 <= len(done) < 80 and store.read_cells(out).num_rows == len(done) * 2 * 4
     run = json.loads((out / "sweep.json").read_text())["runs"][-1]
     assert run["ended_by"] == "interrupted by SIGTERM" and run["cells_run"] == len(done)
+    assert _survivors(p.pid) == []   # Ray's processes ended with the sweep
+
+
+def _survivors(session: int, wait: float = 3.0) -> list[str]:
+    """The live processes of a session (the sweep started with start_new_session: its pid), after up to `wait`
+    seconds for them to end; each killed here, so that a failing test leaves none."""
+    deadline = time.monotonic() + wait
+    while True:
+        left = {}
+        for p in Path("/proc").iterdir():
+            try:
+                fields = (p / "stat").read_text().rsplit(")", 1)[1].split() if p.name.isdigit() else None
+                if fields and int(fields[3]) == session and fields[0] not in "ZX":
+                    left[int(p.name)] = (p / "cmdline").read_bytes().replace(b"\0", b" ").decode()[:60].strip()
+            except (OSError, IndexError):
+                continue
+        if not left or time.monotonic() > deadline:
+            break
+        time.sleep(0.1)
+    for pid in left:
+        with contextlib.suppress(OSError):
+            os.kill(pid, signal.SIGKILL)
+    return sorted(left.values())
+
+
+ORPHAN = """import os, signal, sys, time
+pid = os.fork()
+if pid == 0:   # the grandchild: deaf to SIGTERM, as Ray's agents are, and orphaned when its parent exits
+    signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    time.sleep(60)
+    os._exit(0)
+open(sys.argv[1], "w").write(str(pid))
+"""
+
+
+def test_an_interrupted_ray_start_leaves_no_process_behind(tmp_path, monkeypatch, capsys):
+    """Ctrl-C while Ray starts, its stand-in here: a process that starts one deaf to SIGTERM and exits, orphaning it
+    (as raylet's end orphans ray::DashboardAgent and ray::RuntimeEnvAgent). The sweep ends in one line and the orphan
+    with it."""
+    import ray
+
+    from train.sweeps import driver
+    pid_file = tmp_path / "orphan.pid"
+
+    def starting(address, workers):
+        subprocess.run([sys.executable, "-c", ORPHAN, str(pid_file)], timeout=30, check=True)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ray, "is_initialized", lambda: False)
+    monkeypatch.setattr(driver, "start_ray", starting)
+    path = _write(tmp_path, TINY)
+    try:
+        assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 130
+        assert capsys.readouterr().err.splitlines() == ["train/sweep.py: interrupted before the sweep started"]
+        orphan = Path(f"/proc/{pid_file.read_text()}/stat")
+        assert not orphan.exists() or orphan.read_text().rsplit(")", 1)[1].split()[0] in "ZX"
+    finally:
+        with contextlib.suppress(OSError, ValueError):
+            os.kill(int(pid_file.read_text()), signal.SIGKILL)
+
+
+@pytest.mark.timeout(180)
+def test_a_signal_while_ray_starts_leaves_no_process_behind(tmp_path):
+    """The real thing: SIGTERM once Ray's agents run but (most times) before ray.init has returned, the moment that
+    left ray::DashboardAgent and ray::RuntimeEnvAgent running (7 of 7): one line, exit code 143, no survivor."""
+    path = _write(tmp_path, TINY)
+    p = subprocess.Popen([sys.executable, "train/sweep.py", str(path), "--out", str(tmp_path / "out"), "--workers",
+                          "1"], cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while time.monotonic() < deadline and p.poll() is None and not any(
+                "ray::RuntimeEnvAgent" in c for c in _session_commands(p.pid)):
+            time.sleep(0.02)
+        os.kill(p.pid, signal.SIGTERM)
+        _, stderr = p.communicate(timeout=60)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    lines = [x for x in stderr.strip().splitlines() if not x.startswith("cells: ")]
+    assert p.returncode == 143 and len(lines) == 1 and "interrupted by SIGTERM" in lines[0], stderr
+    assert _survivors(p.pid) == []
+
+
+def _session_commands(session: int) -> list[str]:
+    found = []
+    for p in Path("/proc").iterdir():
+        try:
+            if p.name.isdigit() and int((p / "stat").read_text().rsplit(")", 1)[1].split()[3]) == session:
+                found.append((p / "cmdline").read_bytes().decode(errors="replace"))
+        except (OSError, IndexError):
+            continue
+    return found
 
 
 def test_sighup_ends_a_sweep_as_ctrl_c(finished, tmp_path, local_ray, capsys):

@@ -34,7 +34,11 @@ def world_outcomes(cell: dict, objects: dict | None) -> tuple[dict, dict]:
     with the simulated robot's noise (closed_form), without noise (closed_form_exact), or the pybullet world, each
     distinct train object dropped once and each probe inspected once (physics: the jar is reset between episodes,
     so an object's outcome does not depend on the order it comes in; train/run.py's cached physics)."""
-    from train.learning.experiment import closed_form_outcomes, outcome_record, plain_measurement
+    from train.learning.experiment import (
+        closed_form_outcomes,
+        outcome_record,
+        plain_measurement,
+    )
     objs, seed = objects_of(cell, objects), cell["seed"]
     if cell["world"] != "physics":
         from sim.sensor_model import SensorModel

@@ -16,8 +16,8 @@ import time
 from pathlib import Path
 
 from train.sweeps.cell import run_cell, world_key, world_outcomes
-from train.sweeps.spec import PROG
 from train.sweeps.provenance import utc_now
+from train.sweeps.spec import PROG
 from train.sweeps.store import cell_metadata, encode_cell, write_cell
 
 ROOT = Path(__file__).resolve().parents[2]

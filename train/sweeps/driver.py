@@ -17,9 +17,25 @@ import time
 
 from train.common.exits import Ended, ending_signals, fresh_line, how, sigint_ignored
 from train.sweeps import provenance
-from train.sweeps.cluster import JoinError, Progress, describe, run_sweep, silence_stderr, start_ray, stop_ray
+from train.sweeps.cluster import (
+    JoinError,
+    Progress,
+    describe,
+    run_sweep,
+    silence_stderr,
+    start_ray,
+    stop_ray,
+)
+from train.sweeps.process_tree import ProcessTree
 from train.sweeps.spec import FORMAT, PROG, SweepError, load_sweep
-from train.sweeps.store import check_commits, check_out, needs_pyarrow, survey, write_configs, write_record
+from train.sweeps.store import (
+    check_commits,
+    check_out,
+    needs_pyarrow,
+    survey,
+    write_configs,
+    write_record,
+)
 
 
 def main(parse_args, argv: list[str], on_cell=None, console: bool = False) -> int:
@@ -51,6 +67,7 @@ def _start(a) -> bool:
 
 def _main(parse_args, argv, on_cell, reinstall, console) -> int:
     owns_ray = False   # this process started (or joined) Ray, and so ends it
+    tree = None        # the processes started since (ProcessTree): none outlives the sweep
     progress = None
     out = None
     n_cells = 0
@@ -86,6 +103,7 @@ def _main(parse_args, argv, on_cell, reinstall, console) -> int:
         if todo:   # Ray first: a cluster that cannot be joined leaves nothing behind
             import ray
             owns_ray = not ray.is_initialized()   # from here on a Ctrl-C during ray.init ends what it started
+            tree = ProcessTree() if owns_ray else None
             try:
                 _start(a)
             except JoinError as e:
@@ -148,13 +166,21 @@ def _main(parse_args, argv, on_cell, reinstall, console) -> int:
                       f"{out / 'cells'} (--resume runs the rest)", file=sys.stderr)
             if console:   # the command line's sweep: its one line said, Ray's teardown says nothing more
                 silence_stderr()
-            stop_ray(owns_ray)
-            owns_ray = False
+            _end_ray(owns_ray, tree)
+            owns_ray, tree = False, None
         return code
     finally:
         if owns_ray:
             with sigint_ignored():
-                stop_ray(True)
+                _end_ray(True, tree)
+
+
+def _end_ray(owns: bool, tree: ProcessTree | None) -> None:
+    """Ray shut down, then every process started with it ended (a signal during ray.init leaves some that Ray's
+    shutdown does not know of)."""
+    stop_ray(owns)
+    if tree is not None:
+        tree.end()
 
 
 def _finish(out, record: dict | None, run: dict | None, ended_by: str, failed: int = 0) -> None:

@@ -397,7 +397,12 @@ def report(out: Path, warn=None) -> dict:
     told of each file in DIR/cells that is no cell of the sweep (left out). ReportError (one line) for a DIR it
     cannot summarise."""
     from train.sweeps.spec import SweepError, read_bounded
-    from train.sweeps.store import MAX_RECORD_BYTES, check_cell_file, needs_pyarrow, read_cells
+    from train.sweeps.store import (
+        MAX_RECORD_BYTES,
+        check_cell_file,
+        needs_pyarrow,
+        read_cells,
+    )
     out = Path(out)
     if not out.is_dir():
         raise ReportError(f"{out} is not a directory")
