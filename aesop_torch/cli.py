@@ -38,8 +38,8 @@ def run(argv=None) -> int:
 
 
 def sweep(argv=None) -> int:
-    """aesop-sweep: train/sweep.py."""
-    return _main("aesop-sweep", "train.sweep")(argv)
+    """aesop-sweep: train/sweep.py (its usage line names aesop-sweep)."""
+    return _main("aesop-sweep", "train.sweep")(argv, prog="aesop-sweep")
 
 
 def report(argv=None) -> int:

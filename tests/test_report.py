@@ -130,3 +130,38 @@ def test_a_sweep_record_that_is_a_fifo_is_refused_at_once(swept, capsys):
     assert report_mod.main([str(swept)]) == 2
     assert capsys.readouterr().err.splitlines() == [
         f"train.report: error: {swept / 'sweep.json'}: is a FIFO (named pipe), not a sweep record (a regular file)"]
+
+
+@pytest.mark.parametrize("n_sets, shown", [(9, "20.0 % (n too small: 9 sets)"), (10, "20.0 % [20.0-20.0]")])
+def test_a_95_percent_interval_is_printed_over_ten_object_sets_or_more(tmp_path, n_sets, shown):
+    """Every run at 20 %: any resample's median is 20 %, so the interval over 10 sets is [20.0-20.0]; over 9 it is
+    not printed, and the CSV says why in its place."""
+    rows = _rows("c", n_sets, "IUUD", [0.2] * (2 * n_sets))
+    for r in rows:   # one cell per set ("c1" and "c10" padded alike would collide)
+        r["cell"] = f"c{int(r['set']):015d}"
+    table = pa.Table.from_pylist(rows, schema=sweep_cell.schema())
+    (tmp_path / "cells").mkdir()
+    for cid in sorted({r["cell"] for r in rows}):
+        store.write_cell(tmp_path, cid, table.filter(pa.compute.equal(table.column("cell"), cid)))
+    assert report_mod.main([str(tmp_path)]) == 0
+    assert f"| c | {n_sets} | {2 * n_sets} | {shown} |" in (tmp_path / "report.md").read_text()
+    lines = (tmp_path / "report.csv").read_text().splitlines()
+    row = dict(zip(lines[4].split(","), lines[5].split(",")))
+    assert (row["error_ci95_lo_pct"], row["error_ci95_hi_pct"], row["error_ci95_note"]) == (
+        ("", "", "n too small: 9 sets (a 95 % interval needs 10)") if n_sets == 9 else ("20.0000", "20.0000", ""))
+
+
+def test_the_help_is_whole_and_names_the_command_typed(capsys):
+    from aesop_torch import cli
+    with pytest.raises(SystemExit) as e:
+        cli.report(["--help"])
+    assert e.value.code == 0
+    text = capsys.readouterr().out
+    assert text.startswith("usage: aesop-report [-h] dir\n")
+    flat = " ".join(text.split())
+    assert ("A sweep's summary: novel-object errors with their 95 % intervals (or \"n too small\" over fewer than 10 "
+            "object sets), order agreement and colour's fate per condition, as tables and plots, headed by the "
+            "commit, versions, dates and command lines that made the rows.") in flat
+    with pytest.raises(SystemExit):
+        report_mod.main(["--help"])
+    assert capsys.readouterr().out.startswith("usage: python -m train.report [-h] dir\n")

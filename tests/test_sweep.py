@@ -87,6 +87,22 @@ def test_a_sweep_on_ray_gives_the_rows_of_its_cells_run_in_process(tmp_path, loc
     capsys.readouterr()
     assert sweep.main([str(path), "--out", str(out), "--resume"]) == 0
     assert "4 on disk, 0 to run" in capsys.readouterr().out
+    # every row names the code that made it; the report starts with it, the versions, the dates and the commands
+    assert set(got.column("commit").to_pylist()) == {CLEAN}
+    assert report_mod.main([str(out)]) == 0
+    runs = json.loads((out / "sweep.json").read_text())["runs"]
+    info = [store.cell_info(f) for f in files]
+    versions = ", ".join(f"{k} {info[0]['versions'][k]}" for k in ("python", "torch", "numpy", "pybullet", "pyarrow",
+                                                                     "ray"))
+    about = [f"commit: {CLEAN}", f"versions: {versions}",
+             f"date: {min(i['started'] for i in info)} to {max(i['ended'] for i in info)} (UTC, the cells' first start "
+             f"to last end)",
+             f"command: `train/sweep.py {path} --out {out}` ; then `train/sweep.py {path} --out {out} --resume`"]
+    assert [r["command"] for r in runs] == [f"train/sweep.py {path} --out {out}",
+                                           f"train/sweep.py {path} --out {out} --resume"]
+    assert (out / "report.csv").read_text().splitlines()[:4] == [f"# {line}" for line in about]
+    assert (out / "report.md").read_text().splitlines()[2:6] == [f"- {line}" for line in about]
+    assert versions.startswith(f"python {sys.version.split()[0]}, torch ")
 
 
 def test_an_interrupted_sweep_resumes_to_the_same_table(tmp_path, local_ray, capsys):
@@ -372,6 +388,24 @@ def test_the_constants_kept_without_torch_are_the_agents():
     assert sweep_cell.PROPERTY_COLUMNS == OBJECT_PROPERTIES and sweep_cell.RULE_LETTERS == "".join(RULE_NAMES)
     assert sweep_cell.STATE_LETTERS == KNOWLEDGE_LETTERS
     assert len(set(KNOWLEDGE_LETTERS)) == len(KNOWLEDGE_LETTERS) == len(STATES)   # one letter per state, one table
+
+
+def test_the_docs_name_every_model_and_ablation_and_the_usage_the_command_typed(capsys):
+    """docs/sweeps.md's model and ablate rows and the example's comment follow the tables (they said "paper or
+    extended" after the contextual model came); each usage line names what a person types."""
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| `conditions[].")}
+    assert all(f"`{m}`" in rows["`conditions[].model`"] for m in models.MODELS)
+    assert all(f"`{a}`" in rows["`conditions[].ablate`"] for m in models.MODELS for a in models.ABLATIONS[m])
+    assert all(f'"{m}"' in next(x for x in text.splitlines() if "# required: " in x and "model =" in x)
+               for m in models.MODELS)
+    from aesop_torch import cli
+    for call, usage in ((lambda: cli.sweep(["--help"]), "usage: aesop-sweep "),
+                        (lambda: sweep.main(["--help"]), "usage: python train/sweep.py ")):
+        with pytest.raises(SystemExit):
+            call()
+        out = capsys.readouterr().out
+        assert out.startswith(usage) and "--allow-mixed-commits" in out and out.rstrip().endswith("aesop-report DIR.")
 
 
 def test_the_example_in_docs_and_the_shipped_sweep_files_load():

@@ -540,3 +540,116 @@ def test_a_damaged_sweep_record_is_refused_on_resume_in_one_line(finished, tmp_p
     assert sweep.main([str(finished[0]), "--out", str(out), "--resume"]) == 2
     assert capsys.readouterr().err.splitlines() == [
         f"train/sweep.py: error: --resume: cannot read {out / 'sweep.json'}: {words}"]
+
+
+# -- 9. code that mixes, values out of range, a missing pyarrow -----------------------------------------------------
+
+def _one_missing(finished, tmp_path) -> tuple[Path, list]:
+    """A copy of the finished sweep with its first cell's file removed (one cell to run on --resume)."""
+    out = _copy(finished, tmp_path)
+    (out / "cells" / f"{finished[1][0]['id']}.parquet").unlink()
+    return out, finished[1]
+
+
+@pytest.mark.parametrize("this, words", [
+    ("fedcba9", "the 3 cell(s) on disk were written at 0123abc (3 cells), not at this checkout's fedcba9; check "
+                "that commit out, sweep into another --out, or --allow-mixed-commits to mix them (the report says so)"),
+    ("0123abc-dirty", "this checkout has uncommitted changes (0123abc-dirty), so its cells would not be the same "
+                      "code as the 3 on disk (written at 0123abc (3 cells)); commit, or --allow-mixed-commits to mix "
+                      "them (the report says so)"),
+    ("unknown", "this checkout's commit is unknown (not a git checkout?), so its cells would not be the same code as "
+                "the 3 on disk (written at 0123abc (3 cells)); commit, or --allow-mixed-commits to mix them (the "
+                "report says so)"),
+])
+def test_resume_refuses_cells_of_other_code_in_one_line(finished, tmp_path, monkeypatch, capsys, this, words):
+    out, _ = _one_missing(finished, tmp_path)
+    before = sorted((p.name, p.stat().st_mtime_ns) for p in out.rglob("*"))
+    monkeypatch.setattr(provenance, "commit", lambda: this)
+    assert sweep.main([str(finished[0]), "--out", str(out), "--resume"]) == 2
+    captured = capsys.readouterr()
+    assert captured.out == "" and captured.err.splitlines() == [f"train/sweep.py: error: --resume: {words}"]
+    assert sorted((p.name, p.stat().st_mtime_ns) for p in out.rglob("*")) == before   # nothing written
+
+
+def test_cells_written_from_a_dirty_tree_are_refused_even_at_the_same_string(finished, tmp_path, monkeypatch, capsys):
+    """Two dirty trees at one commit need not hold the same code: the commit does not name it."""
+    out, cells = _one_missing(finished, tmp_path)
+    for c in cells[1:]:
+        store.write_cell(out, c["id"], sweep_cell.run_cell(c["spec"], c["objects"], commit="0123abc-dirty"))
+    monkeypatch.setattr(provenance, "commit", lambda: "0123abc-dirty")
+    assert sweep.main([str(finished[0]), "--out", str(out), "--resume"]) == 2
+    assert "this checkout has uncommitted changes (0123abc-dirty)" in capsys.readouterr().err
+
+
+def test_allow_mixed_commits_runs_the_rest_and_the_report_names_every_commit(finished, tmp_path, monkeypatch,
+                                                                             local_ray, capsys):
+    out, cells = _one_missing(finished, tmp_path)
+    monkeypatch.setattr(provenance, "commit", lambda: "fedcba9")
+    assert sweep.main([str(finished[0]), "--out", str(out), "--resume", "--allow-mixed-commits"]) == 0
+    err = [x for x in capsys.readouterr().err.splitlines() if not x.startswith("cells: ")]
+    assert err == ["train/sweep.py: --allow-mixed-commits: the cells on disk were written at 0123abc (3), the cells "
+                   "run now at fedcba9; the report says so"]
+    rows = store.read_cells(out)
+    by_cell = dict(zip(rows.column("cell").to_pylist(), rows.column("commit").to_pylist()))
+    assert by_cell == {c["id"]: "fedcba9" if c is cells[0] else "0123abc" for c in cells}   # every row its commit
+    run = json.loads((out / "sweep.json").read_text())["runs"][-1]
+    assert run["allow_mixed_commits"] is True and run["commit"] == "fedcba9"
+    from train import report as report_cli
+    assert report_cli.main([str(out)]) == 0
+    mixed = ["commits: MIXED CODE, 2 commits: 0123abc (3 cells), fedcba9 (1 cell)",
+             "the cells were not all computed by the same code (--resume --allow-mixed-commits): compare conditions "
+             "only within one commit's cells (the rows' commit column)"]
+    assert (out / "report.csv").read_text().splitlines()[:2] == [f"# {line}" for line in mixed]
+    assert (out / "report.md").read_text().splitlines()[2:4] == [f"- {line}" for line in mixed]
+    # without --resume the flag means nothing: refused
+    assert sweep.main([str(finished[0]), "--out", str(tmp_path / "new"), "--allow-mixed-commits"]) == 2
+    assert capsys.readouterr().err.splitlines() == [
+        "train/sweep.py: error: --allow-mixed-commits goes with --resume (a new sweep writes all its cells at one "
+        "commit)"]
+
+
+@pytest.mark.parametrize("column, value, words", [
+    ("probe_rel_error", float("nan"), "its column probe_rel_error holds nan at row 3, not a relative error (0 to "
+                                      "1e+09, or none)"),
+    ("probe_rel_error", -2699268.624, "its column probe_rel_error holds -2699268.624 at row 3, not a relative error"),
+    ("observed_cm3", 1e12, "its column observed_cm3 holds 1000000000000.0 at row 3, not a rise a jar holds (at most "
+                           "29,063 cm^3)"),
+    ("predicted_cm3", float("inf"), "its column predicted_cm3 holds inf at row 3, not a prediction"),
+    ("knowledge", "UUXU", "its column knowledge holds 'UUXU' at row 3, not letters of ULDI"),
+    ("episode", 7, "its column episode holds 7 at row 3, not an episode of the cell (1 to n_train)"),
+])
+def test_a_cell_rewritten_out_of_range_with_a_valid_checksum_is_refused(finished, tmp_path, capsys, column, value,
+                                                                        words):
+    """A cell file rewritten with NaN or an absurd value (its pages' checksums valid: encode_cell wrote it) is named
+    with its column, row and value: --resume runs the cell again, the report refuses it in one line."""
+    out = _copy(finished, tmp_path)
+    cells = finished[1]
+    target = out / "cells" / f"{cells[1]['id']}.parquet"
+    t = pq.read_table(target).replace_schema_metadata(None)
+    values = t.column(column).to_pylist()
+    values[3] = value
+    t = t.set_column(t.schema.get_field_index(column), column, pa.array(values, t.schema.field(column).type))
+    target.write_bytes(store.encode_cell(t))
+    done, _, bad = store.survey(out, cells)
+    assert done == {c["id"] for c in cells} - {cells[1]["id"]}
+    assert [(p, why) for p, why in bad] == [(target, bad[0][1])] and bad[0][1].startswith(words), bad
+    from train import report as report_cli
+    assert report_cli.main([str(out)]) == 2
+    line, = capsys.readouterr().err.splitlines()
+    assert line.startswith(f"train.report: error: {target}: {words}") and line.endswith("runs its cell again")
+    assert not (out / "report.md").exists()
+
+
+def test_a_missing_pyarrow_is_named_as_such(finished, tmp_path, monkeypatch, capsys):
+    """Not 'not a readable Parquet file ... runs its cell again' for every good file (and each set aside)."""
+    out = _copy(finished, tmp_path)
+    before = sorted(p.name for p in (out / "cells").iterdir())
+    for name in [m for m in sys.modules if m == "pyarrow" or m.startswith("pyarrow.")]:
+        monkeypatch.setitem(sys.modules, name, None)
+    assert sweep.main([str(finished[0]), "--out", str(out), "--resume"]) == 2
+    from train import report as report_cli
+    assert report_cli.main([str(out)]) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert len(err) == 2 and all("pyarrow is not installed" in x and "Parquet" in x for x in err), err
+    assert err[0].startswith("train/sweep.py: error: ") and err[1].startswith("train.report: error: ")
+    assert sorted(p.name for p in (out / "cells").iterdir()) == before   # no file set aside

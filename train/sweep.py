@@ -27,6 +27,7 @@ driver.py (from the flags to the exit code).
 from __future__ import annotations
 
 import argparse
+import functools
 import sys
 from pathlib import Path
 
@@ -34,7 +35,7 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from train.sweeps import driver  # noqa: E402
-from train.sweeps.spec import PROG, SweepError  # noqa: E402
+from train.sweeps.spec import SweepError  # noqa: E402
 
 
 class _Parser(argparse.ArgumentParser):
@@ -52,8 +53,9 @@ def _count(text: str) -> int:
     return n
 
 
-def parse_args(argv):
-    ap = _Parser(prog=PROG, description=__doc__.split("\n")[0],
+def parse_args(argv, prog: str = "python train/sweep.py"):
+    """The flags; prog: the command as typed, for the usage line. SweepError (one line) for bad ones."""
+    ap = _Parser(prog=prog, description=__doc__.split("\n")[0],
                  epilog="The sweep file, DIR and the rows: docs/sweeps.md. Summary: aesop-report DIR.")
     ap.add_argument("sweep", type=Path, metavar="SWEEP.toml", help="the sweep file (TOML, docs/sweeps.md)")
     ap.add_argument("--out", type=Path, metavar="DIR", help="the sweep's directory (default: runs/sweep-<the sweep file's name>)")
@@ -73,10 +75,11 @@ def parse_args(argv):
     return a
 
 
-def main(argv=None, on_cell=None) -> int:
+def main(argv=None, on_cell=None, prog: str = "python train/sweep.py") -> int:
     """The command line (and aesop-sweep): 0 done, 2 bad input, 1 a failed cell or write, 130/143/129 a signal.
-    on_cell(cell): called after each cell is written (tests)."""
-    return driver.main(parse_args, sys.argv[1:] if argv is None else list(argv), on_cell, console=argv is None)
+    on_cell(cell): called after each cell is written (tests); prog: the command as typed, for the usage line."""
+    return driver.main(functools.partial(parse_args, prog=prog), sys.argv[1:] if argv is None else list(argv),
+                       on_cell, console=argv is None)
 
 
 if __name__ == "__main__":

@@ -355,7 +355,7 @@ def provenance_lines(table, files: list[Path], record: dict | None) -> list[str]
     warning when there is more than one or one is a dirty tree's), the libraries' versions (the workers', from each
     cell file; else the driver's, from DIR/sweep.json), the dates (the first cell's start to the last one's end)
     and each run's command line (DIR/sweep.json). From the rows and DIR alone: the same DIR, the same lines."""
-    from train.sweeps.provenance import names_its_code
+    from train.sweeps.provenance import LIBRARIES, names_its_code
     from train.sweeps.store import cell_info
     per_cell = dict(zip(*(table.column(k).to_pylist() for k in ("cell", "commit"))))
     commits = Counter(per_cell.values()).most_common()
@@ -372,7 +372,10 @@ def provenance_lines(table, files: list[Path], record: dict | None) -> list[str]
     found = [i["versions"] for i in infos if isinstance(i.get("versions"), dict)] or \
         [r["versions"] for r in runs if isinstance(r.get("versions"), dict)]
     distinct = list(dict.fromkeys(json.dumps(v, sort_keys=True) for v in found))
-    shown_v = ["; ".join(", ".join(f"{k} {v}" for k, v in json.loads(d).items()) for d in distinct)]
+    order = ("python", *LIBRARIES)   # Python first, then the libraries as provenance lists them
+    shown_v = ["; ".join(", ".join(f"{k} {v[k]}" for k in sorted(v, key=lambda k: (k not in order, order.index(k)
+                                                                                   if k in order else 0, k)))
+                         for v in map(json.loads, distinct))]
     lines.append(("versions: " if len(distinct) == 1 else f"versions ({len(distinct)} sets): ") + shown_v[0]
                  if distinct else "versions: not recorded (the cell files hold no provenance, DIR no sweep.json)")
     starts = [i["started"] for i in infos if isinstance(i.get("started"), str)]
