@@ -11,8 +11,8 @@ import pytest
 
 from train import report as report_mod
 from train.sweeps import cell as sweep_cell
-from train.sweeps import store
 from train.sweeps import report as sweeps_report
+from train.sweeps import store
 
 ROOT = Path(__file__).resolve().parents[1]
 

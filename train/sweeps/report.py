@@ -346,7 +346,7 @@ def write_md(s: dict, path: Path, out: Path, n_cells: int, spec: dict | None, ab
 
 
 def _write(path: Path, text: str) -> None:
-    from train.sweeps.store import write_atomic
+    from sim.output_files import write_atomic
     write_atomic(path, text.encode())
 
 

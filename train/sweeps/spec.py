@@ -10,10 +10,9 @@ from __future__ import annotations
 import hashlib
 import json
 import math
-import os
-import stat
 from pathlib import Path
 
+from sim.input_files import show
 from train.common.models import ABLATIONS, MODELS, check_capacity
 
 PROG = "train/sweep.py"  # what every line of a sweep starts with
@@ -38,14 +37,9 @@ class SweepError(Exception):
     """A bad sweep file, flag or DIR: one line on stderr, exit code 2."""
 
 
-def _show(v) -> str:
-    text = json.dumps(v, default=str)
-    return text if len(text) <= 60 else text[:57] + "..."
-
-
 def _keys(d, allowed, where: str) -> dict:
     if not isinstance(d, dict):
-        raise SweepError(f"{where}: expected a table, got {_show(d)}")
+        raise SweepError(f"{where}: expected a table, got {show(d)}")
     if bad := [k for k in d if k not in allowed]:
         raise SweepError(f"{where}: unknown key {bad[0]!r} (known: {', '.join(allowed)})")
     return d
@@ -53,7 +47,7 @@ def _keys(d, allowed, where: str) -> dict:
 
 def _int(v, where: str, lo: int, hi: int) -> int:
     if isinstance(v, bool) or not isinstance(v, int):
-        raise SweepError(f"{where}: expected a whole number, got {_show(v)}")
+        raise SweepError(f"{where}: expected a whole number, got {show(v)}")
     if not lo <= v <= hi:
         raise SweepError(f"{where}: must be in {lo}..{hi}, got {v}")
     return v
@@ -73,15 +67,15 @@ def _entry_name(entry: dict, where: str, names: set, kind: str) -> tuple[str, st
 
 def _name(v, where: str) -> str:
     if not isinstance(v, str) or not v.strip():
-        raise SweepError(f"{where}: expected a non-empty string, got {_show(v)}")
+        raise SweepError(f"{where}: expected a non-empty string, got {show(v)}")
     if not v.isprintable() or len(v) > 100:
-        raise SweepError(f"{where}: at most 100 printable characters, got {_show(v)}")
+        raise SweepError(f"{where}: at most 100 printable characters, got {show(v)}")
     return v
 
 
 def _list(v, where: str) -> list:
     if not isinstance(v, list):
-        raise SweepError(f"{where}: expected a list, got {_show(v)}")
+        raise SweepError(f"{where}: expected a list, got {show(v)}")
     if not v:
         raise SweepError(f"{where}: the list is empty")
     return v
@@ -99,7 +93,7 @@ def _seeds(v, where: str) -> list[int]:
         return seeds
     if not isinstance(v, list) or len(v) != 2:
         raise SweepError(f"{where}: expected a range [first, end) of two whole numbers or {{list = [...]}}, "
-                         f"got {_show(v)}")
+                         f"got {show(v)}")
     a, b = (_int(x, f"{where}[{i}]", 0, MAX_SEED) for i, x in enumerate(v))
     if b <= a:
         raise SweepError(f"{where}: the range [{a}, {b}) is empty")
@@ -116,7 +110,7 @@ def _orders(v, where: str, n_train: int) -> str:
                              f"(at most 8 objects); give a number of random orders")
         return v
     if isinstance(v, str):
-        raise SweepError(f"{where}: expected a number of random orders, 'listed' or 'all', got {_show(v)}")
+        raise SweepError(f"{where}: expected a number of random orders, 'listed' or 'all', got {show(v)}")
     return str(_int(v, where, 1, MAX_ORDERS))
 
 
@@ -144,7 +138,7 @@ def _flat_overrides(d, where: str, prefix: str = "") -> dict:
                 raise SweepError(f"{where}: {key!r} = {v} is not a finite number")
             out[key] = v
         else:
-            raise SweepError(f"{where}: {key!r}: expected a number, string, boolean or list, got {_show(v)}")
+            raise SweepError(f"{where}: {key!r}: expected a number, string, boolean or list, got {show(v)}")
     return out
 
 
@@ -167,19 +161,19 @@ def _condition(c, where: str, names: set) -> dict:
         raise SweepError(f"{where}: no 'model' (one of: {', '.join(MODELS)})")
     model = c["model"]
     if model not in MODELS:
-        raise SweepError(f"{where}: model: {_show(model)} is not a model (known: {', '.join(MODELS)})")
+        raise SweepError(f"{where}: model: {show(model)} is not a model (known: {', '.join(MODELS)})")
     ablate = c.get("ablate", [])
     if not isinstance(ablate, list):
-        raise SweepError(f"{where}: ablate: expected a list (e.g. [\"rules\"]), got {_show(ablate)}")
+        raise SweepError(f"{where}: ablate: expected a list (e.g. [\"rules\"]), got {show(ablate)}")
     for a in ablate:
         if a not in ABLATIONS[model]:
-            raise SweepError(f"{where}: ablate: {_show(a)} is no ablation of the {model} model (it has: "
+            raise SweepError(f"{where}: ablate: {show(a)} is no ablation of the {model} model (it has: "
                              f"{', '.join(ABLATIONS[model])})")
     if len(set(ablate)) != len(ablate):
         raise SweepError(f"{where}: ablate: {next(a for a in ablate if ablate.count(a) > 1)!r} is listed twice")
     overrides = c.get("overrides", {})
     if not isinstance(overrides, dict):
-        raise SweepError(f"{where}: overrides: expected a table of dotted keys, got {_show(overrides)}")
+        raise SweepError(f"{where}: overrides: expected a table of dotted keys, got {show(overrides)}")
     cond = {"name": name, "model": model, "ablate": [a for a in ABLATIONS[model] if a in ablate],
             "overrides": dict(sorted(_flat_overrides(overrides, where + " overrides").items()))}
     for key, why in (("model", "the condition's model"), ("ablate", "the condition's ablate"),
@@ -238,9 +232,9 @@ def _set(s, where: str, base: Path, names: set) -> tuple[dict, list[dict]]:
                "probe": _int(g.get("probe", 8), where + ".generate.probe", 0, 1000),
                "pairs": g.get("pairs", True), "jar": g.get("jar", "random")}
         if not isinstance(gen["pairs"], bool):
-            raise SweepError(f"{where}.generate.pairs: expected true or false, got {_show(gen['pairs'])}")
+            raise SweepError(f"{where}.generate.pairs: expected true or false, got {show(gen['pairs'])}")
         if gen["jar"] not in ("random", "default"):
-            raise SweepError(f"{where}.generate.jar: expected \"random\" or \"default\", got {_show(gen['jar'])}")
+            raise SweepError(f"{where}.generate.jar: expected \"random\" or \"default\", got {show(gen['jar'])}")
         seeds = _seeds(g["seeds"], where + ".generate.seeds")
         try:
             generate(seeds[0], gen["train"], gen["probe"], gen["pairs"], gen["jar"])   # the counts' refusals
@@ -259,26 +253,18 @@ def _set(s, where: str, base: Path, names: set) -> tuple[dict, list[dict]]:
 
 
 def read_bounded(path, limit: int, what: str) -> bytes:
-    """A file's bytes, if it is a regular file of at most `limit` bytes; SweepError (one line) otherwise. Opened
-    without blocking (a FIFO must not wait for a writer) and read no further than the limit (/dev/zero never ends)."""
+    """A file's bytes, if it is a regular file of at most `limit` bytes; SweepError (one line) otherwise: the
+    project's bounded reader (sim.input_files.read_bytes: no wait on a FIFO, /dev/zero read no further than the
+    limit), its refusals worded as the sweeps' contract words them (docs/sweeps.md)."""
+    from sim.input_files import InputFileError, read_bytes
     try:
-        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
-    except OSError as e:
-        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
-    try:
-        with os.fdopen(fd, "rb") as f:
-            mode = os.fstat(f.fileno()).st_mode
-            if not stat.S_ISREG(mode):
-                kind = ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
-                        "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode)
-                        else "no regular file")
-                raise SweepError(f"{path}: is {kind}, not {what} (a regular file)")
-            raw = f.read(limit + 1)
-    except OSError as e:
-        raise SweepError(f"{path}: cannot read it: {e.strerror or e}") from None
-    if len(raw) > limit:
-        raise SweepError(f"{path}: larger than {limit:,} bytes, too large for {what}")
-    return raw
+        return read_bytes(path, str(path), limit)
+    except InputFileError as e:
+        if e.reason == "kind":
+            raise SweepError(f"{path}: is {e.detail}, not {what} (a regular file)") from None
+        if e.reason == "size":
+            raise SweepError(f"{path}: larger than {limit:,} bytes, too large for {what}") from None
+        raise SweepError(f"{path}: cannot read it: {e.detail or e}") from None
 
 
 def _depth(doc) -> int:
@@ -349,10 +335,10 @@ def resolve(doc: dict, base: Path) -> tuple[dict, list[dict]]:
 def _resolve(doc: dict, base: Path) -> tuple[dict, list[dict]]:
     _keys(doc, TOP_KEYS, "the sweep file")
     if "description" in doc and not isinstance(doc["description"], str):
-        raise SweepError(f"description: expected a string, got {_show(doc['description'])}")
+        raise SweepError(f"description: expected a string, got {show(doc['description'])}")
     world = doc.get("world", "closed_form")
     if world not in WORLDS:
-        raise SweepError(f"world: {_show(world)} is not a world (known: {', '.join(WORLDS)})")
+        raise SweepError(f"world: {show(world)} is not a world (known: {', '.join(WORLDS)})")
     for key in ("conditions", "sets"):
         if key not in doc:
             raise SweepError(f"no [[{key}]]")

@@ -8,11 +8,11 @@ is there, and the report reads it.
 from __future__ import annotations
 
 import json
-import os
 import stat
-import tempfile
 from pathlib import Path
 
+from sim.output_files import write_atomic
+from train.common.out_checks import link_inside, refuse_uncreatable, refuse_unusable, refuse_unwritable
 from train.sweeps import provenance
 from train.sweeps.cell import cell_id, config_hash, config_record, schema
 from train.sweeps.spec import FORMAT, SweepError, n_orders, read_bounded
@@ -51,24 +51,6 @@ def cell_info(path) -> dict:
 
 
 # -- writing ------------------------------------------------------------------------------------------------------
-
-def write_atomic(path: Path, data: bytes) -> None:
-    """`data` to `path` through a temporary file in its directory, renamed into place: a reader (or --resume)
-    never sees half a file."""
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
-
 
 def encode_cell(table, metadata: dict | None = None) -> bytes:
     """A cell's rows as the bytes of its Parquet file (zstd, a CRC per page, so --resume notices a damaged one),
@@ -224,29 +206,14 @@ def _first_difference(a, b, where: str = "") -> str:
 WRITTEN = ("sweep.json", "configs.json", "cells")   # what a sweep writes in DIR
 
 
-def _link_inside(out: Path) -> Path | None:
-    """The first symbolic link among what the sweep writes in DIR (a link would send its writes elsewhere)."""
-    for name in WRITTEN:
-        top = out / name
-        if top.is_symlink():
-            return top
-    if (out / "cells").is_dir():
-        for entry in sorted(os.scandir(out / "cells"), key=lambda e: e.name):
-            if entry.is_symlink():
-                return Path(entry.path)
-    return None
-
-
 def check_out(out: Path, spec: dict, resume: bool) -> dict | None:
-    """Refuse a DIR this sweep may not write (nothing is created here). --resume: the record DIR/sweep.json holds."""
-    if out.is_symlink() and not out.exists():
-        raise SweepError(f"--out {out} is a symbolic link to nothing ({os.readlink(out)})")
-    if out.exists() and not out.is_dir():
-        raise SweepError(f"--out {out} exists and is not a directory")
+    """Refuse a DIR this sweep may not write (nothing is created here): the checks every --out gets
+    (train/common/out_checks.py), and the sweep's own. --resume: the record DIR/sweep.json holds."""
+    refuse_unusable(out, SweepError)
     recorded = out / "sweep.json"
     record = None
     if resume:
-        if link := _link_inside(out):
+        if link := link_inside(out, WRITTEN):
             raise SweepError(f"--resume: {link} is a symbolic link; the sweep writes only inside --out {out}: "
                              f"remove it")
         if not recorded.exists():
@@ -266,15 +233,8 @@ def check_out(out: Path, spec: dict, resume: bool) -> dict | None:
             raise SweepError(f"--resume: {out / 'cells'} is not a directory")
     elif out.is_dir() and any(out.iterdir()):
         raise SweepError(f"--out {out} already holds files; --resume to continue its sweep, or another --out")
-    p = out
-    while not p.exists():
-        if p.is_symlink():
-            raise SweepError(f"--out {out}: {p} is a symbolic link to nothing")
-        p = p.parent
-    if not os.access(p, os.W_OK | os.X_OK):
-        raise SweepError(f"--out {out}: {p} is not writable")
-    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
-        raise SweepError(f"--out {out} is not writable")
+    refuse_uncreatable(out, SweepError)
+    refuse_unwritable(out, SweepError)
     return record
 
 
