@@ -617,6 +617,7 @@ def test_allow_mixed_commits_runs_the_rest_and_the_report_names_every_commit(fin
     ("predicted_cm3", float("inf"), "its column predicted_cm3 holds inf at row 3, not a prediction"),
     ("knowledge", "UUXU", "its column knowledge holds 'UUXU' at row 3, not letters of ULDI"),
     ("episode", 7, "its column episode holds 7 at row 3, not an episode of the cell (1 to n_train)"),
+    ("probe_errors", [0.1, float("nan"), 0.2], "its column probe_errors holds nan at row 3, not a relative error"),
 ])
 def test_a_cell_rewritten_out_of_range_with_a_valid_checksum_is_refused(finished, tmp_path, capsys, column, value,
                                                                         words):

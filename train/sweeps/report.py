@@ -268,7 +268,8 @@ def write_md(s: dict, path: Path, out: Path, n_cells: int, spec: dict | None, ab
     if spec:
         total = len(spec["conditions"]) * sum(len(o["seeds"]) for st in spec["sets"] for o in st["objects"])
     lines.append(f"{n_cells} cell(s)" + (f" of {total}" if total is not None else "") + " finished"
-                 + (f"; world {spec['world']}" if spec else "") + ". Written by `aesop-report` (python -m train.report); every "
+                 + (f"; world {spec['world']}" if spec else "") + ". Written by `aesop-report` (python -m train.report); "
+                 "every "
                  "figure is also in report.csv. Counts: sets = object sets (the independent unit), runs = (set, seed, "
                  "order), cells = (set, seed).")
     lines += ["", "## Novel-object error", "",
@@ -360,7 +361,8 @@ def provenance_lines(table, files: list[Path], record: dict | None) -> list[str]
     per_cell = dict(zip(*(table.column(k).to_pylist() for k in ("cell", "commit"))))
     commits = Counter(per_cell.values()).most_common()
     shown = ", ".join(f"{c} ({n} cell{'s' if n != 1 else ''})" for c, n in commits)
-    lines = [f"commit: {commits[0][0]}" if len(commits) == 1 else f"commits: MIXED CODE, {len(commits)} commits: {shown}"]
+    lines = [f"commit: {commits[0][0]}" if len(commits) == 1 else
+             f"commits: MIXED CODE, {len(commits)} commits: {shown}"]
     if len(commits) > 1:
         lines.append("the cells were not all computed by the same code (--resume --allow-mixed-commits): compare "
                      "conditions only within one commit's cells (the rows' commit column)")

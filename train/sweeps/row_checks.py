@@ -28,66 +28,77 @@ def _cut(v) -> str:
     return text if len(text) <= 60 else text[:57] + "..."
 
 
+def _first(bad) -> int | None:
+    """The first True of a boolean array, or None."""
+    import numpy as np
+    hits = np.flatnonzero(bad)
+    return int(hits[0]) if hits.size else None
+
+
 def rows_problem(table) -> str | None:
     """Why the rows (a Table of cell.schema()) are not what run_cell writes, naming the first column out of range,
-    its row and its value; None when every column is in range."""
+    its row and its value; None when every column is in range. Vectorised: a large sweep's report checks every
+    cell's rows."""
     import numpy as np
+    import pyarrow.compute as pc
 
-    def col(name):
-        return table.column(name).to_pylist()
+    def num(name):   # (values as float64 with NaN for null, null mask)
+        c = table.column(name)
+        return c.cast("float64").to_numpy(zero_copy_only=False), np.asarray(c.is_null())
 
-    n_train, n_orders = col("n_train"), col("n_orders")
-    ints = {   # column: (its check given the row, what it must be)
-        "n_train": (lambda v, i: v is not None and 1 <= v <= MAX_OBJECTS, f"a count of train objects (1 to {MAX_OBJECTS:,})"),
-        "n_probe": (lambda v, i: v is not None and 0 <= v <= MAX_OBJECTS, f"a count of probes (0 to {MAX_OBJECTS:,})"),
-        "n_orders": (lambda v, i: v is not None and 1 <= v <= MAX_ORDERS, f"a count of orders (1 to {MAX_ORDERS:,})"),
-        "order": (lambda v, i: v is not None and 0 <= v < n_orders[i], "an order of the cell (0 to n_orders - 1)"),
-        "episode": (lambda v, i: v is not None and 1 <= v <= n_train[i], "an episode of the cell (1 to n_train)"),
-        "seed": (lambda v, i: v is not None and v >= 0, "a seed (0 or more)"),
-        "generator_seed": (lambda v, i: v is None or v >= 0, "a generator seed (0 or more, or none)"),
-        "stored": (lambda v, i: v is not None and 0 <= v <= n_train[i], "a count of stored episodes (0 to n_train)"),
-    }
-    for name, (ok, what) in ints.items():
-        for i, v in enumerate(col(name)):
-            if not ok(v, i):
-                return f"its column {name} holds {_cut(v)} at row {i}, not {what}"
+    def said(name, i, what):
+        return f"its column {name} holds {_cut(table.column(name)[i].as_py())} at row {i}, not {what}"
 
-    def fin(v):
-        return v is not None and isinstance(v, float) and math.isfinite(v)
-
-    prediction = PREDICTION_JARS * JAR_CM3
-    floats = {
-        "observed_cm3": (lambda v, i: fin(v) and abs(v) <= JAR_CM3, f"a rise a jar holds (at most {JAR_CM3:,.0f} cm^3)"),
-        "archimedes_cm3": (lambda v, i: fin(v) and 0 < v <= JAR_CM3,
-                           f"an object's volume a jar holds (0 to {JAR_CM3:,.0f} cm^3)"),
-        "predicted_cm3": (lambda v, i: v is None or (fin(v) and abs(v) <= prediction),
-                          f"a prediction (a finite volume within {PREDICTION_JARS:g} jars, or none)"),
-        "probe_rel_error": (lambda v, i: v is None or (fin(v) and 0 <= v <= MAX_REL_ERROR),
-                            f"a relative error (0 to {MAX_REL_ERROR:g}, or none)"),
-        "recalled": (lambda v, i: v is None or (fin(v) and 0 <= v <= n_train[i]),
-                     "a count of recalled episodes (0 to n_train, or none)"),
-    }
-    for name, (ok, what) in floats.items():
-        for i, v in enumerate(col(name)):
-            if not ok(v, i):
-                return f"its column {name} holds {_cut(v)} at row {i}, not {what}"
-    for name in ("probe_errors", "probe_floors"):
-        for i, vs in enumerate(col(name)):
-            if vs is not None and not all(fin(v) and 0 <= v <= MAX_REL_ERROR for v in vs):
-                bad = next(v for v in vs if not (fin(v) and 0 <= v <= MAX_REL_ERROR))
-                return f"its column {name} holds {_cut(bad)} at row {i}, not a relative error (0 to {MAX_REL_ERROR:g})"
+    n_train, _ = num("n_train")
+    n_orders, _ = num("n_orders")
+    with np.errstate(invalid="ignore"):   # NaN compares False: a NaN fails every range below
+        ints = {   # column: (the bad rows given values v and nulls z, what it must be)
+            "n_train": (lambda v, z: z | ~((v >= 1) & (v <= MAX_OBJECTS)),
+                        f"a count of train objects (1 to {MAX_OBJECTS:,})"),
+            "n_probe": (lambda v, z: z | ~((v >= 0) & (v <= MAX_OBJECTS)), f"a count of probes (0 to {MAX_OBJECTS:,})"),
+            "n_orders": (lambda v, z: z | ~((v >= 1) & (v <= MAX_ORDERS)), f"a count of orders (1 to {MAX_ORDERS:,})"),
+            "order": (lambda v, z: z | ~((v >= 0) & (v < n_orders)), "an order of the cell (0 to n_orders - 1)"),
+            "episode": (lambda v, z: z | ~((v >= 1) & (v <= n_train)), "an episode of the cell (1 to n_train)"),
+            "seed": (lambda v, z: z | ~(v >= 0), "a seed (0 or more)"),
+            "generator_seed": (lambda v, z: ~z & ~(v >= 0), "a generator seed (0 or more, or none)"),
+            "stored": (lambda v, z: z | ~((v >= 0) & (v <= n_train)), "a count of stored episodes (0 to n_train)"),
+        }
+        prediction = PREDICTION_JARS * JAR_CM3
+        floats = {
+            "observed_cm3": (lambda v, z: z | ~(np.abs(v) <= JAR_CM3),
+                             f"a rise a jar holds (at most {JAR_CM3:,.0f} cm^3)"),
+            "archimedes_cm3": (lambda v, z: z | ~((v > 0) & (v <= JAR_CM3)),
+                               f"an object's volume a jar holds (0 to {JAR_CM3:,.0f} cm^3)"),
+            "predicted_cm3": (lambda v, z: ~z & ~(np.abs(v) <= prediction),
+                              f"a prediction (a finite volume within {PREDICTION_JARS:g} jars, or none)"),
+            "probe_rel_error": (lambda v, z: ~z & ~((v >= 0) & (v <= MAX_REL_ERROR)),
+                                f"a relative error (0 to {MAX_REL_ERROR:g}, or none)"),
+            "recalled": (lambda v, z: ~z & ~((v >= 0) & (v <= n_train)),
+                         "a count of recalled episodes (0 to n_train, or none)"),
+        }
+        for name, (bad, what) in {**ints, **floats}.items():
+            if (i := _first(bad(*num(name)))) is not None:
+                return said(name, i, what)
+        for name in ("probe_errors", "probe_floors"):
+            c = table.column(name)
+            flat = pc.list_flatten(c).cast("float64").to_numpy(zero_copy_only=False)
+            bad = ~((flat >= 0) & (flat <= MAX_REL_ERROR))
+            if (j := _first(bad)) is not None:
+                row = int(np.searchsorted(np.cumsum(pc.fill_null(pc.list_value_length(c), 0).to_numpy()), j,
+                                          side="right"))
+                return (f"its column {name} holds {_cut(float(flat[j]))} at row {row}, not a relative error (0 to "
+                        f"{MAX_REL_ERROR:g})")
     letters = {"knowledge": (STATE_LETTERS, False, None), "rules": (RULE_LETTERS, False, None),
                "batch_knowledge": (STATE_LETTERS, True, None),
                **{p: (STATE_LETTERS, True, 1) for p in PROPERTY_COLUMNS}}
     for name, (alphabet, nullable, length) in letters.items():
-        for i, v in enumerate(col(name)):
-            if v is None and nullable:
-                continue
-            if v is None or not set(v) <= set(alphabet) or (length is not None and len(v) != length):
-                return (f"its column {name} holds {_cut(v)} at row {i}, not "
-                        f"{'a letter' if length else 'letters'} of {alphabet}{' (or none)' if nullable else ''}")
+        c = table.column(name)
+        ok = pc.match_substring_regex(c, f"^[{alphabet}]{{{length}}}$" if length else f"^[{alphabet}]*$")
+        bad = ~np.asarray(pc.fill_null(ok, nullable))
+        if (i := _first(bad)) is not None:
+            what = f"{'a letter' if length else 'letters'} of {alphabet}{' (or none)' if nullable else ''}"
+            return said(name, i, what)
     for name in ("sank", "goal_reached", "commit", "cell", "condition", "world", "set_group", "set", "object"):
-        if table.column(name).null_count:
-            i = int(np.flatnonzero(np.asarray(table.column(name).is_null()))[0])
+        if (i := _first(np.asarray(table.column(name).is_null()))) is not None:
             return f"its column {name} is empty at row {i}"
     return None

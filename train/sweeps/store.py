@@ -161,7 +161,8 @@ def cell_commits(out: Path, ids) -> dict[str, int]:
     import pyarrow.parquet as pq
     found: dict[str, int] = {}
     for cid in sorted(ids):
-        for c in pq.read_table(out / "cells" / f"{cid}.parquet", columns=["commit"]).column("commit").unique().to_pylist():
+        rows = pq.read_table(out / "cells" / f"{cid}.parquet", columns=["commit"])
+        for c in rows.column("commit").unique().to_pylist():
             found[c] = found.get(c, 0) + 1
     return dict(sorted(found.items(), key=lambda kv: -kv[1]))
 
