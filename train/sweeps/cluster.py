@@ -107,7 +107,7 @@ def start_ray(address: str | None, workers: int | None) -> bool:
     import ray
     if ray.is_initialized():
         return False
-    job = ray.job_config.JobConfig(code_search_path=[str(ROOT)])   # the workers import train.sweep from here
+    job = ray.job_config.JobConfig(code_search_path=[str(ROOT)])   # the workers import train.sweeps from here
     if address is not None:
         try:
             _reachable(address)

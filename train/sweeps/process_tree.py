@@ -18,6 +18,7 @@ from pathlib import Path
 
 PR_SET_CHILD_SUBREAPER = 36   # linux/prctl.h
 GRACE_S = 2.0                 # Ray's processes end within a second of SIGTERM when they end at all; the agents never do
+GIVE_UP_S = 5.0               # after SIGKILL: only a process stuck in the kernel outlives this
 
 
 def _set_subreaper(on: bool) -> bool:
@@ -74,8 +75,8 @@ class ProcessTree:
         while True:
             live = {p for p in self.started() if _table().get(p, (0, "Z"))[1] not in "ZX"}
             self._reap()
-            if not live:
-                break
+            if not live or time.monotonic() > deadline + GIVE_UP_S:   # a process SIGKILL cannot end (stuck in the
+                break                                                 # kernel): not waited for for ever
             if time.monotonic() > deadline:
                 sig = signal.SIGKILL
             for p in live:
