@@ -64,7 +64,7 @@ def test_the_benchs_defaults_are_its_sweep_file(ablation):
 
 def test_the_benchs_rows_and_figures_are_the_sweeps(tmp_path, ablation, local_ray, capsys):
     """A few cells through the bench's path (its process pool) and through train/sweep.py on Ray: equal rows, so
-    the bench's medians (train.report.summarise of its rows) are the report's."""
+    the bench's medians (train.sweeps.report.summarise of its rows) are the report's."""
     conditions = ["paper", "extended -prior"]
     plan = [("8", 2, 6, 3, 2, (2, 6)), ("life", 1, 9, 2, 1, (4, 9))]
     bench = _sorted(ablation.agent_rows(conditions, plan, 5, workers=1))
