@@ -38,13 +38,13 @@ def run(argv=None) -> int:
 
 
 def sweep(argv=None) -> int:
-    """aesop-sweep: train/sweep.py."""
-    return _main("aesop-sweep", "train.sweep")(argv)
+    """aesop-sweep: train/sweep.py (its usage line names aesop-sweep)."""
+    return _main("aesop-sweep", "train.sweep")(argv, prog="aesop-sweep")
 
 
 def report(argv=None) -> int:
-    """aesop-report: python -m train.report."""
-    return _main("aesop-report", "train.report")(argv)
+    """aesop-report: python -m train.report (its usage line names aesop-report)."""
+    return _main("aesop-report", "train.report")(argv, prog="aesop-report")
 
 
 def ask(argv=None) -> int:

@@ -25,7 +25,7 @@ extended_rules_off_ratio_24=` (err_24 from the sets of 24, err_64 and err_230 fr
 model's error over the model's). `--record` writes the output into BENCHMARKS.md.
 
 The agent conditions (the six above) run as the sweep benches/ablation.toml runs them: each (condition, set) is
-train/sweep.py's cell (`train.sweep.run_cell`, one code path) and their figures are train/report.py's medians, so
+train/sweep.py's cell (`train.sweeps.cell.run_cell`, one code path) and their figures are train/report.py's medians, so
 `python train/sweep.py benches/ablation.toml` then `python -m train.report` gives these figures digit for digit (and
 at scale, on a Ray cluster). The peers and paper +knowledge (its knowledge set by hand) are no sweep conditions: they
 run here, their medians taken the same way.
@@ -58,8 +58,9 @@ from train.learning.experiment import closed_form_outcomes, draw_orders, stack_m
 from train.learning.population import knowledge_keys  # noqa: E402
 from train.learning.sim_pool import cores  # noqa: E402
 from train.common.progress import Step  # noqa: E402
-from train import sweep  # noqa: E402
-from train.report import summarise  # noqa: E402
+from train.sweeps import cell as sweep_cell  # noqa: E402
+from train.sweeps import spec as sweep_spec  # noqa: E402
+from train.sweeps.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
 
@@ -178,17 +179,17 @@ def _task(t):
     torch.set_num_threads(1)
     if t[0] == "cell":   # an agent condition: the sweep's cell, and its wall time
         t0 = time.perf_counter()
-        table = sweep.run_cell(t[1]["spec"], t[1]["objects"])
+        table = sweep_cell.run_cell(t[1]["spec"], t[1]["objects"])
         return table, time.perf_counter() - t0
     return run(*t[1:])
 
 
 def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None, times: dict | None = None):
-    """The rows (a pyarrow Table of train.sweep.schema()) of the agent conditions on the plan's sets: the sweep's
+    """The rows (a pyarrow Table of train.sweeps.cell.schema()) of the agent conditions on the plan's sets: the sweep's
     cells, run on `workers` processes. Equal, row for row, to train/sweep.py on sweep_doc's file. times: filled with
     {(condition, set group): [each cell's wall time, s]}."""
     import pyarrow as pa
-    _, cells = sweep.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
+    _, cells = sweep_spec.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         tables = []
         for c, (t, seconds) in zip(cells, pool.imap(_task, [("cell", c) for c in cells])):

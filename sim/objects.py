@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.input_files import printable, quoted, show
+
 DEFAULT_OBJECTS_FILE = Path(__file__).with_name("default_objects.json")
 WATER_DENSITY_G_CM3 = 1.0
 SHAPES = {"cylinder": 2, "cube": 1, "sphere": 1, "box": 3}  # shape -> number of dims
@@ -71,7 +73,6 @@ TRIAL_KEYS = {"stand", "goal"}
 DEFAULT_GOAL = "reach the green ball"   # the paper's goal: what the teacher says when a trial names none
 MAX_GOAL_CHARS = 200         # a goal is a short phrase; this bounds the error line that quotes it
 MAX_STAND = 8                # objects on the stand of one goal trial: the exact random baseline enumerates subsets
-MAX_SHOWN = 60               # characters of a refused value quoted in an error line
 
 
 class ObjectsFileError(ValueError):
@@ -85,24 +86,9 @@ class ObjectsFileError(ValueError):
         super().__init__(_printable(str(message)))
 
 
-def _printable(text: str) -> str:
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
-def _show(value) -> str:
-    """A refused value as the error line quotes it: JSON (so a string is quoted and every non-ASCII or control
-    character escaped), cut to MAX_SHOWN characters."""
-    try:
-        text = json.dumps(value, ensure_ascii=True)
-    except (TypeError, ValueError, RecursionError):   # not a JSON value (parse_objects on a Python object)
-        text = _printable(repr(value))
-    return text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "..."
-
-
-def _quoted(word) -> str:
-    """A key or a word as the error line quotes it: in single quotes, escaped as `_show` escapes a string."""
-    text = json.dumps(str(word), ensure_ascii=True)[1:-1].replace('\\"', '"')
-    return "'" + (text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "...") + "'"
+# the quoters of sim/input_files.py (one home for every input file's refusals), under the names this module and
+# sim/apparatus.py use
+_printable, _show, _quoted = printable, show, quoted
 
 
 @dataclass(frozen=True)

@@ -108,3 +108,11 @@ def test_no_import_circles():
         if v not in index:
             visit(v)
     assert not circles, f"import circles: {circles}"
+
+
+def test_one_atomic_writer():
+    """Atomic writes have one home (sim/output_files.py, the lowest floor that writes such files): make_objects, the
+    checkpoints and the sweeps each had their own copy of the temporary-file dance."""
+    writers = sorted(str(p.relative_to(ROOT)) for pkg in PACKAGES for p in (ROOT / pkg).rglob("*.py")
+                     if "mkstemp(" in p.read_text())
+    assert writers == ["sim/output_files.py"]

@@ -372,10 +372,11 @@ def test_a_lock_that_is_not_a_regular_file_is_refused_without_touching_anything(
 
 
 def test_the_runners_tables_of_models_and_ablations_are_the_agents():
-    """train/run.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported."""
-    import train.run as runner
+    """train/common/models.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported
+    (the runner's and the sweeps' one table)."""
     from aesop_torch.agent import ABLATIONS, MODELS
-    assert runner.MODELS == MODELS and runner.ABLATIONS == ABLATIONS
+    from train.common import models
+    assert models.MODELS == MODELS and models.ABLATIONS == ABLATIONS
 
 
 # -- what the other commands say, and the console commands ------------------------------------------------------------

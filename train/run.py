@@ -34,8 +34,9 @@ if __package__ in (None, ""):  # run as a script: make the project importable wi
 from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
                            sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.runner.settings import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
-                              adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
+from train.common.models import MODELS, check_capacity  # noqa: E402
+from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
+                              adopt_run, count_orders, gather_config, load_objects_or_fail,
                               load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
 DEFAULT_OUT = "runs/run-<date-time>"

@@ -18,7 +18,8 @@ import sys
 import threading
 
 ENDING = (signal.SIGTERM, signal.SIGHUP)   # the signals that end a run as Ctrl-C does
-_RUNNER = {"pid": None}   # the process whose handlers raise Ended (a forked child inherits them: see _ended)
+_RUNNER = {"pid": None, "signal": None}   # the process whose handlers raise Ended (a forked child inherits them:
+                                         # see _ended), and the last signal they saw
 
 
 class UsageError(Exception):
@@ -39,30 +40,38 @@ def _ended(signum, frame):
         signal.signal(signum, signal.SIG_DFL)
         os.kill(os.getpid(), signum)
         return
+    # kept: raised inside a library's C++ wait (Ray's), the exception may reach Python as a plain KeyboardInterrupt
+    _RUNNER["signal"] = signum
     raise Ended(signum)
 
 
 def how(e: KeyboardInterrupt) -> tuple[str, int]:
-    """(" by SIGTERM" or "", exit code) of an interruption: Ctrl-C 130, a signal 128 + its number."""
-    signum = getattr(e, "signum", signal.SIGINT)
+    """(" by SIGTERM" or "", exit code) of an interruption: Ctrl-C 130, a signal 128 + its number (an Ended's own, or
+    the last one ending_signals saw, where a library turned it into its own KeyboardInterrupt)."""
+    signum = getattr(e, "signum", None) or _RUNNER["signal"] or signal.SIGINT
     return ("" if signum == signal.SIGINT else f" by {signal.Signals(signum).name}"), 128 + signum
 
 
 @contextlib.contextmanager
 def ending_signals():
     """SIGTERM and SIGHUP raise Ended while the block runs (only the main thread may set handlers; one ignored, as
-    under nohup, stays ignored); the previous handlers afterwards, so a signal after it ends the process silently."""
+    under nohup, stays ignored); the previous handlers afterwards, so a signal after it ends the process silently.
+    Yields a function that sets them again, for after a library put its own in place (ray.init's SIGTERM handler)."""
     main = threading.current_thread() is threading.main_thread()
     previous = {sig: signal.getsignal(sig) for sig in ENDING} if main else {}
-    try:
+    _RUNNER["signal"] = None
+
+    def install():
         for sig, handler in previous.items():
             if handler is not signal.SIG_IGN:
                 _RUNNER["pid"] = os.getpid()
                 signal.signal(sig, _ended)
-        yield
+    try:
+        install()
+        yield install
     finally:
-        for sig, handler in previous.items():
-            signal.signal(sig, handler)
+        for sig, handler in previous.items():   # None: a handler not set from Python (the default's stand-in)
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
 
 
 @contextlib.contextmanager
@@ -133,9 +142,10 @@ def console() -> None:
             setattr(sys, name, open(fd, "w", closefd=False))
 
 
-def fresh_line() -> str:
-    """A newline on a terminal, where a progress bar (or ^C) may have left the cursor mid-line; nothing in a log."""
-    return "\n" if sys.stdout.isatty() else ""
+def fresh_line(stream=None) -> str:
+    """A newline where `stream` (default stdout, where the runner's progress goes) is a terminal, where a progress
+    bar (or ^C) may have left the cursor mid-line; nothing in a log."""
+    return "\n" if (stream or sys.stdout).isatty() else ""
 
 
 def os_error(e: OSError) -> str:

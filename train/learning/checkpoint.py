@@ -16,9 +16,9 @@ import hashlib
 import io
 import os
 import struct
-import tempfile
 from pathlib import Path
 
+from sim.output_files import write_atomic
 from train.learning.checkpoint_checks import finite, measurement_ok, state_problem
 
 FORMAT = "aesop-torch checkpoint"
@@ -43,21 +43,11 @@ def _write_bytes(f, data: bytes) -> None:
 
 
 def _write_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """sim.output_files.write_atomic, its temporary file `<name>.<random>.tmp` (train/runner/out_dir.py knows a killed
+    write's leftovers by it), through _write_bytes (tests stand a full disk in its place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            _write_bytes(f, data)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; an output file is as readable as any other
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_atomic(path, data, hidden=False, write=lambda f, d: _write_bytes(f, d))
 
 
 def save_atomic(state: dict, path: str | os.PathLike) -> None:

@@ -6,7 +6,7 @@ The config's overrides apply in order, a later value of a key replacing an earli
 in the order given, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed). Their syntax
 and the run-level keys are checked torch-free (gather_config); every other key against the dataclasses
 (resolve_config, which imports torch and the simulator). Each refusal is a UsageError naming where the value came
-from. train/sweep.py shares the tables of models and ablations and check_capacity.
+from. The tables of models and ablations and check_capacity are train/common/models.py's, shared with the sweeps.
 """
 
 from __future__ import annotations
@@ -17,6 +17,7 @@ import re
 from pathlib import Path
 
 from train.common.exits import UsageError
+from train.common.models import ABLATIONS, MODELS
 from train.runner.out_dir import CONFIG_NAME, RUN_NAME
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -24,9 +25,6 @@ DEFAULT_OBJECTS = ROOT / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
-MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
-             "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
@@ -214,26 +212,6 @@ def origin(origins: dict, key: str | None) -> str:
         return ""
     hits = [k for k in origins if k == key or k.startswith(key + ".") or key.startswith(k + ".")]
     return f"{origins[hits[-1]]}: " if hits else ""
-
-
-def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}={value}") -> str | None:
-    """Why a run of n_train episodes cannot end with this AgentConfig, in one line, or None. A memory or hub whose
-    when_full is `refuse` stops the run at its first episode past capacity, maybe hours in: refused before anything
-    is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
-    a copy with room for theirs (train/learning/goal_trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
-    differs)."""
-    full = []   # (part, its size's key, the size) of each part that would refuse
-    for part, key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
-        c = getattr(agent, part)
-        if c.when_full == "refuse" and n_train > getattr(c, key):
-            full.append((part, key, getattr(c, key)))
-    if not full:
-        return None
-    sizes = ", ".join(f"{part}.{key} = {size} and {part}.when_full = refuse" for part, key, size in full)
-    forget = " ".join(setting(f"{part}.when_full", "forget_oldest") for part, _, _ in full)
-    grow = " ".join(setting(f"{part}.{key}", n_train) for part, key, _ in full)
-    return (f"{n_train} train objects but {sizes}: the run would stop at episode "
-            f"{min(size for _, _, size in full) + 1}; {forget} (or forget_weakest), or {grow}")
 
 
 def world_kw(args) -> dict:
