@@ -19,20 +19,27 @@ intact and --resume continues. A closed stdout (`>&-`): the run goes on without 
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
-import time
-from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+
+# Signals first: from here on a Ctrl-C, SIGTERM or SIGHUP waits for main() to say its one line (exits.early_signals)
+from train.common import exits  # noqa: E402
+
+if __name__ == "__main__":
+    exits.early_signals()
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 # Only light imports up here: torch takes about a second to import; everything the first line needs is checked
 # without it. The parts: train/runner/settings.py (the settings and the config), train/runner/out_dir.py (--out, its lock),
 # train/common/exits.py (signals, the one line, exit codes), train/runner/loop.py (the run itself).
 from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
-                           sigint_ignored)
+                                raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
 from train.runner.settings import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
                               adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
@@ -125,10 +132,11 @@ def main(argv=None) -> int:
 
 
 def _main(argv=None) -> int:
-    from train.runner import loop as run_loop
-
+    run_loop = None
     ran = None   # the run's exit code once it has returned
     try:
+        raise_pending()   # a signal that came before main() (early_signals)
+        from train.runner import loop as run_loop
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
             if args.objects is not None and _is_task_file(args.objects):
@@ -165,7 +173,8 @@ def _main(argv=None) -> int:
     except KeyboardInterrupt as e:
         by, code = how(e)
         with sigint_ignored():
-            run_loop.close_quietly()
+            if run_loop is not None:
+                run_loop.close_quietly()
             when = "before the run started" if ran is None else f"as the run ended (exit code {ran} otherwise)"
             print(f"{fresh_line()}train/run.py: interrupted{by} {when}", file=sys.stderr)
         return code
@@ -217,6 +226,7 @@ def run_task(args) -> int:
 def console_main() -> None:
     """`python train/run.py` and the console command aesop-run: the run, then its exit without the interpreter's
     teardown (everything is written and closed; train/common/exits.py exit_now)."""
+    exits.early_signals()   # aesop-run's (the script's already, before its imports)
     exit_now(main())
 
 

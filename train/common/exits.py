@@ -6,11 +6,16 @@ code 128 + the signal's number (130, 143, 129). A write error: one line, exit co
 
 The runner's clean-up after the first signal must not be cut short by a second (sigint_ignored), and the end of a
 worker pool must not be cut short by the first (signals_held: a pool left half-ended waits for ever in its
-finaliser). Torch-free: the runner imports this before its first line.
+finaliser). Nor may an import: a KeyboardInterrupt raised inside one is turned into an ImportError by a C extension
+that imports another (pybullet's numpy: "numpy._core.multiarray failed to import", a traceback) or swallowed by an
+`except ImportError` (the signal lost), so while ending_signals runs, a signal that comes during an import of the
+main thread takes effect when that import is done (_held_import). From the runner's first line (early_signals) to
+its main(), a signal waits for main() (raise_pending). Torch-free: the runner imports this before its first line.
 """
 
 from __future__ import annotations
 
+import builtins
 import contextlib
 import os
 import signal
@@ -18,7 +23,11 @@ import sys
 import threading
 
 ENDING = (signal.SIGTERM, signal.SIGHUP)   # the signals that end a run as Ctrl-C does
-_RUNNER = {"pid": None}   # the process whose handlers raise Ended (a forked child inherits them: see _ended)
+# the process whose handlers raise Ended (a forked child inherits them: see _ended); "defer": the handler records a
+# signal in "pending" instead of raising it (before main(), and during an import); "imports": the main thread's
+# imports under way (_held_import)
+_RUNNER = {"pid": None, "defer": False, "pending": None, "imports": 0}
+_IMPORT = builtins.__import__
 
 
 class UsageError(Exception):
@@ -34,12 +43,57 @@ class Ended(KeyboardInterrupt):
         self.signum = signum
 
 
+def _interruption(signum: int) -> KeyboardInterrupt:
+    return KeyboardInterrupt() if signum == signal.SIGINT else Ended(signum)
+
+
 def _ended(signum, frame):
-    if os.getpid() != _RUNNER["pid"]:   # a worker forked before it reset its handlers: the default, silently
-        signal.signal(signum, signal.SIG_DFL)
-        os.kill(os.getpid(), signum)
+    if os.getpid() != _RUNNER["pid"]:   # a process forked before it reset its handlers: a pool's worker's way
+        if signum == signal.SIGINT:     # (ignores Ctrl-C, dies of the others silently)
+            signal.signal(signum, signal.SIG_IGN)
+        else:
+            signal.signal(signum, signal.SIG_DFL)
+            os.kill(os.getpid(), signum)
         return
-    raise Ended(signum)
+    if _RUNNER["defer"] or _RUNNER["imports"]:
+        if _RUNNER["pending"] is None:   # the first one decides the exit code, as it would have
+            _RUNNER["pending"] = signum
+        return
+    raise _interruption(signum)
+
+
+def _held_import(*args, **kwargs):
+    """builtins.__import__ while ending_signals runs: a signal during an import of the main thread is raised when
+    the outermost import is done (or has failed), never inside it (see the module's docstring)."""
+    if threading.get_ident() != threading.main_thread().ident:
+        return _IMPORT(*args, **kwargs)
+    _RUNNER["imports"] += 1
+    try:
+        return _IMPORT(*args, **kwargs)
+    finally:
+        _RUNNER["imports"] -= 1
+        if not _RUNNER["imports"] and not _RUNNER["defer"]:
+            raise_pending()
+
+
+def raise_pending() -> None:
+    """Raise the signal that came while signals were deferred (before main(), during an import), if one did."""
+    signum, _RUNNER["pending"] = _RUNNER["pending"], None
+    if signum is not None:
+        raise _interruption(signum)
+
+
+def early_signals() -> None:
+    """The runner's first line (`python train/run.py`, before its imports): Ctrl-C, SIGTERM and SIGHUP from here
+    to main() are recorded, not raised (an interrupted import is a traceback), and main() raises the first one where
+    it says its one line. One ignored (nohup, a background job's Ctrl-C) stays ignored. Only before the interpreter
+    reaches this line (its start, tens of milliseconds) does a signal end the process at its default."""
+    if threading.current_thread() is not threading.main_thread():
+        return
+    _RUNNER["pid"], _RUNNER["defer"] = os.getpid(), True
+    for sig in (signal.SIGINT, *ENDING):
+        if signal.getsignal(sig) is not signal.SIG_IGN:
+            signal.signal(sig, _ended)
 
 
 def how(e: KeyboardInterrupt) -> tuple[str, int]:
@@ -50,17 +104,26 @@ def how(e: KeyboardInterrupt) -> tuple[str, int]:
 
 @contextlib.contextmanager
 def ending_signals():
-    """SIGTERM and SIGHUP raise Ended while the block runs (only the main thread may set handlers; one ignored, as
-    under nohup, stays ignored); the previous handlers afterwards, so a signal after it ends the process silently."""
+    """SIGTERM and SIGHUP raise Ended, Ctrl-C KeyboardInterrupt, while the block runs, except during an import of
+    the main thread, after which they do (only the main thread may set handlers; one ignored, as under nohup, stays
+    ignored); the previous handlers afterwards. A signal recorded before (early_signals) waits for raise_pending,
+    which the block's owner calls where it can say its line."""
     main = threading.current_thread() is threading.main_thread()
-    previous = {sig: signal.getsignal(sig) for sig in ENDING} if main else {}
+    handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, *ENDING)} if main else {}
+    previous = {sig: h for sig, h in handlers.items() if h is not None}   # None: set outside Python, left as it is
+    defer = _RUNNER["defer"]
     try:
+        if main:
+            _RUNNER["pid"], _RUNNER["defer"] = os.getpid(), False
+            builtins.__import__ = _held_import
         for sig, handler in previous.items():
             if handler is not signal.SIG_IGN:
-                _RUNNER["pid"] = os.getpid()
                 signal.signal(sig, _ended)
         yield
     finally:
+        if main:
+            builtins.__import__ = _IMPORT
+            _RUNNER["defer"] = defer
         for sig, handler in previous.items():
             signal.signal(sig, handler)
 
