@@ -160,9 +160,27 @@ RANGES = {
     # the jar's round wall is a polygon of this many staves (pybullet builds 16 to a link; 256 make the polygon's
     # area within 0.01 % of the circle's)
     "world.tank.staves": (3, True, 256),
-    # the run's seed (the agent's is the run's: train.learning.experiment sets it)
-    "seed": (0, True, MAX_SEED - 1),
+    # the run's seed (the agent's is the run's: train.learning.experiment sets it) and the IK's restarts' generator's
+    # (a torch.Generator takes 64 bits)
+    "seed": (0, True, MAX_SEED - 1), "world.ik.seed": (0, True, MAX_SEED - 1),
+    # episodes a recall brings back are at most those a memory holds (memory.max_episodes, at most 2000)
+    "fate_recalls": (1, True, 2000), "memory.max_recalls": (1, True, 2000),
+    # a match of the hub's relative activity (the same object shown again: 1, exactly or a hair less) and the word
+    # maps' cosines (imagine_floor) and fraction of goal words heard (goal_floor) lie in 0..1: a threshold at or below
+    # 0 takes every object for the first one (every phrase for a name, for the goal), one above 1 never matches
+    "hub.match_threshold": (0, False, 1), "imagine_floor": (0, False, 1), "goal_floor": (0, False, 1),
+    # "marginally reduce": a factor above 1 would grow an undecided pathway; the contradiction's relative tolerance
+    # compares |observed - expected| with the larger of the two: beyond 1 nothing is ever off by that much (same_rel
+    # is at most it: train/runner/config_checks.py)
+    "rules.uncertain_decay": FRACTION, "rules.contradiction_rel": FRACTION,
+    # pulls down (the water's force and the hand's weighing divide by it; 0 or less: nothing falls into the jar)
+    "world.tank.gravity": POSITIVE, "world.tank.water.gravity": POSITIVE,
 }
+# an int field without an upper bound above (a count, a size): at most this, what a 64-bit tensor or generator holds
+MAX_INT = MAX_SEED - 1
+# bounds of each element of a flat tuple field: colours are RGB(A) fractions; a motor's force limit is a magnitude
+ELEMENT_RANGES = {"world.tank.jar_rgba": FRACTION, "world.tank.water_rgba": FRACTION, "world.tank.ball_rgb": FRACTION,
+                  "world.robot.arm_max_force": NON_NEGATIVE}
 
 
 class ConfigError(Exception):
@@ -389,6 +407,21 @@ def check_world(world_config, objects) -> None:
         raise ConfigError(f"world.tank: the ball (ball_diameter_cm {tank.ball_diameter_cm:g}, ball_mass_g "
                           f"{tank.ball_mass_g:g}, water.density {tank.water.density:g}) floats {draft:.2f} cm deep, "
                           f"more than the jar's {jar.water_depth_cm:g} cm of water", "world.tank")
+    robot, default = world_config.robot, RobotConfig()
+    if robot.home_arm != default.home_arm:                                                              # set_arm
+        limits = _joint_limits(icub_urdf_path())
+        for name, q in zip(ARM_JOINTS, robot.home_arm):
+            lo, hi = limits[name]
+            if not lo <= q <= hi:
+                raise ConfigError(f"world.robot.home_arm: {name}={q:g} rad is outside [{lo:.4f}, {hi:.4f}]",
+                                  "world.robot.home_arm")
+    if robot.colliding_links != default.colliding_links:                                                # _rewrite
+        from sim.robot import parsed_urdf
+        links = {link.get("name") for link in parsed_urdf(icub_urdf_path()).findall("link")}
+        if bad := [name for name in robot.colliding_links if name not in links]:
+            raise ConfigError(f"world.robot.colliding_links: {_show(bad[0])} is not a link of the iCub (its arm's: "
+                              f"{', '.join(sorted(n for n in links if n.startswith('r_')))[:200]}...)",
+                              "world.robot.colliding_links")
     posture = world_config.robot.body_posture
     if posture != RobotConfig().body_posture:                                                           # load_icub
         limits = _joint_limits(icub_urdf_path())
@@ -541,6 +574,8 @@ def _check_scalar(key: str, kind: type, value, optional: bool = False, bounds=No
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         ok = True
     rng = bounds if bounds is not None else RANGES.get(key, NON_NEGATIVE if kind is int else None)
+    if kind is int and rng is not None and rng[2] is None:
+        rng = (rng[0], rng[1], MAX_INT)
     if not ok:
         raise ConfigError(f"{key} takes {KINDS[kind]}{' or none' if optional else ''}, got {_show(value)}", key)
     if kind is float:
@@ -600,7 +635,11 @@ def _check_tuple(key: str, current, value, optional: bool = False):
                 raise ConfigError(f"{key} takes {desc}, got {_show(value)} ({where} is {_show(x)})", key)
             out.append(tuple(_element(f"{where}[{j}]", k, y, key, desc) for j, (k, y) in enumerate(zip(inner, x))))
         else:
-            out.append(_element(where, elem, x, key, desc))
+            x = _element(where, elem, x, key, desc)
+            if key in ELEMENT_RANGES and not _in_range(x, ELEMENT_RANGES[key]):
+                raise ConfigError(f"{key} takes {desc}, each {_range_text(ELEMENT_RANGES[key])}, got {where} = "
+                                  f"{_show(x)}", key)
+            out.append(x)
     return tuple(out)
 
 
