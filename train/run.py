@@ -2,7 +2,7 @@
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--config FILE.toml] [--set KEY=VALUE ...]
-                        [--model paper|extended] [--ablate rules|gating|prior ...]
+                        [--model paper|contextual|extended] [--ablate PART ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
 The model's and the world's config (train/common/config.py): the defaults, then the --config file, then each --set in
@@ -41,7 +41,8 @@ from pathlib import Path  # noqa: E402
 from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
                                 raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.runner.settings import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
+from train.runner.settings import (ABLATION_HELP, ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
+                                   MODEL_HELP, MODELS,
                               adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
                               load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
@@ -70,6 +71,23 @@ keys model, ablate and seed): when the file and a flag both give a value, the fl
 the wrong type or out of range: one line, exit 2, nothing written. CONTRACTS.md has the details."""
 
 
+def model_help() -> str:
+    """--model's help from the tables (train/runner/settings.py MODELS, MODEL_HELP): every model, so none is left out."""
+    return "; ".join(f"{m}: {MODEL_HELP.get(m, 'see CONTRACTS.md')}" for m in MODELS) + \
+        " (default: paper, or the config's model)"
+
+
+def ablate_help() -> str:
+    """--ablate's help from the tables (ABLATIONS, ABLATION_HELP): each part, and the models that have it."""
+    parts = list(dict.fromkeys(p for m in MODELS for p in ABLATIONS[m]))
+    said = []
+    for part in parts:
+        having = [m for m in MODELS if part in ABLATIONS[m]]
+        only = "" if len(having) == len(MODELS) else f"{', '.join(having)} only: "
+        said.append(f"{part} ({only}{ABLATION_HELP.get(part, 'see CONTRACTS.md')})")
+    return "switch a part off (repeatable; replaces the config's ablate): " + ", ".join(said)
+
+
 def parse_args(argv):
     ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter,
                 epilog=CONFIG_HELP)
@@ -92,14 +110,8 @@ def parse_args(argv):
                     help="set one config key (repeatable, applied after --config, in order), e.g. "
                          "rules.uncertain_decay=1.0, memory.max_recalls=none, model=extended, world.mass_noise_g=5, "
                          "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
-    ap.add_argument("--model", choices=MODELS, default=None,
-                    help="paper: the paper's mechanism (incremental rules, knowledge-gated recall, a weighted average "
-                         "of recalled rewards); extended: evidence-set rules with contexts and a readout fitted with "
-                         "the task's physics priors (default: paper, or the config's model)")
-    ap.add_argument("--ablate", action="append", default=None, metavar="PART",
-                    help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
-                         "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
-                         "physics priors)")
+    ap.add_argument("--model", choices=MODELS, default=None, help=model_help())
+    ap.add_argument("--ablate", action="append", default=None, metavar="PART", help=ablate_help())
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")

@@ -88,7 +88,7 @@ RANGES = {
     # a memory and a hub hold at most the objects of one life (sim.objects.ObjectsConfig.max_objects, 2000), and an
     # episode is compared with at most the episodes they hold
     "hub.n_neurons": (1, True, 12_000), "hub.assembly_size": (1, True, 12_000), "hub.rows": (1, True, 12_000),
-    "hub.max_assemblies": (1, True, 2000), "memory.max_episodes": (0, True, 2000), "compare_with": (0, True, 2000),
+    "hub.max_assemblies": (1, True, 2000), "memory.max_episodes": (0, True, 2000),
     # the sheet's neurons (memory.rows x memory.cols: the paper's 20 x 50) are each driven by every other in a recall
     # step, so its work grows as their square: 100 x 1000 is 10^4x the paper's (the hub is the sheet's object rows,
     # hub.rows x hub.n_neurons = 12 x memory.cols, so this bounds it too); a recall step settles in ~5 clamped and ~2
@@ -172,7 +172,12 @@ RANGES = {
     # "marginally reduce": a factor above 1 would grow an undecided pathway; the contradiction's relative tolerance
     # compares |observed - expected| with the larger of the two: beyond 1 nothing is ever off by that much (same_rel
     # is at most it: train/runner/config_checks.py)
-    "rules.uncertain_decay": FRACTION, "rules.contradiction_rel": FRACTION,
+    "rules.uncertain_decay": FRACTION, "rules.contradiction_rel": (0, True, 1, False),
+    # a neuron's estimate of its own activity: 0 (off) .. 1 (on), a stored episode's own neurons exactly 1; a neuron
+    # fires above the threshold, so at 1 or more none ever does (every recall empty, every prediction missing)
+    "memory.threshold": (0, True, 1, False),
+    # compared with no recalled episode, no rule ever fires (what --ablate rules says); none: with every one
+    "compare_with": (1, True, 2000),
     # pulls down (the water's force and the hand's weighing divide by it; 0 or less: nothing falls into the jar)
     "world.tank.gravity": POSITIVE, "world.tank.water.gravity": POSITIVE,
 }
@@ -575,7 +580,7 @@ def _check_scalar(key: str, kind: type, value, optional: bool = False, bounds=No
         ok = True
     rng = bounds if bounds is not None else RANGES.get(key, NON_NEGATIVE if kind is int else None)
     if kind is int and rng is not None and rng[2] is None:
-        rng = (rng[0], rng[1], MAX_INT)
+        rng = (rng[0], rng[1], MAX_INT)   # what a 64-bit tensor or generator holds
     if not ok:
         raise ConfigError(f"{key} takes {KINDS[kind]}{' or none' if optional else ''}, got {_show(value)}", key)
     if kind is float:
@@ -592,15 +597,18 @@ def _check_scalar(key: str, kind: type, value, optional: bool = False, bounds=No
 
 
 def _range_text(rng) -> str:
-    lo, inclusive, hi = rng
+    lo, inclusive, hi, *below = rng
+    if below and not below[0]:
+        return f"from {lo} to below {hi}"
     if hi is not None:
         return f"from {lo} to {hi:,}" if hi > 10 ** 6 else f"from {lo} to {hi}"
     return f"{'>=' if inclusive else '>'} {lo}"
 
 
 def _in_range(v, rng) -> bool:
-    lo, inclusive, hi = rng
-    return (v >= lo if inclusive else v > lo) and (hi is None or v <= hi)
+    """rng: (low, low included, high or None) or, for a high bound not included, (..., high, False)."""
+    lo, inclusive, hi, *hi_in = rng
+    return (v >= lo if inclusive else v > lo) and (hi is None or (v <= hi if not hi_in or hi_in[0] else v < hi))
 
 
 def _kind(x) -> type:

@@ -102,7 +102,9 @@ def resume_experiment(args, objects):
 
     ckpt_path = args.out / "checkpoints" / "latest.pt"
     if not ckpt_path.is_file():
-        raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
+        raise UsageError(f"--resume: no checkpoint at {ckpt_path}: the run ended before it wrote one, so there is "
+                         f"nothing to continue; start it again without --resume (with another --out, or remove "
+                         f"{args.out})")
     try:
         state = load(ckpt_path)
     except CheckpointError as e:

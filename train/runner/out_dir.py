@@ -31,7 +31,8 @@ def check_out(out: Path, resume: bool) -> None:
         raise UsageError(f"--out {out} exists and is not a directory")
     if resume:
         if not out.is_dir():
-            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist)")
+            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist): "
+                             "nothing to continue; start the run without --resume")
     else:
         p = out
         while not p.exists():

@@ -27,6 +27,24 @@ MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; s
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
              "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
+# what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
+# and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
+MODEL_HELP = {
+    "paper": "the paper's mechanism (rules that edit the pathway strengths one firing at a time, knowledge-gated "
+             "recall, a recall-weighted average of the recalled rewards)",
+    "contextual": "the paper's parts, its rules' knowledge kept per fate the robot sees (what decides the fate, what "
+                  "decides the reward among floaters and among sinkers), shape split into fill and elongation, a "
+                  "recall in two steps and a local fit over the recalled episodes of the expected fate",
+    "extended": "evidence-set rules with floating / sinking contexts and a readout fitted with the task's physics "
+                "priors",
+}
+ABLATION_HELP = {
+    "rules": "no rule fires: the strengths stay 1, the knowledge unknown",
+    "gating": "the memory's cue ignores the strengths: knowledge no longer reaches recall",
+    "context": "no fates: one set of strengths judged on the reward, one recall",
+    "fit": "the paper's average of the recalled rewards of the expected fate instead of the local fit",
+    "prior": "the readout's fit without its physics priors",
+}
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
@@ -81,7 +99,8 @@ def gather_config(a) -> None:
     if a.seed is not None:
         put("seed", a.seed, "--seed")
     a.overrides, a.origins = overrides, origins
-    run_level(a)
+    if not getattr(a, "resume", False):   # --resume: once the run's own model is known (adopt_run)
+        run_level(a)
 
 
 def run_level(a) -> None:
@@ -114,6 +133,7 @@ def adopt_run(a) -> None:
 
     path = a.out / RUN_NAME
     if path.is_symlink() or not path.is_file():
+        run_level(a)   # a run from before run.json: the flags as given
         return
     try:
         from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
