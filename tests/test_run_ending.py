@@ -322,9 +322,11 @@ def test_a_signal_during_an_import_takes_effect_when_the_import_is_done(tmp_path
     code = ("import sys\n"
             f"sys.path.insert(0, {str(tmp_path)!r})\n"
             "from train.common.exits import Ended, ending_signals\n"
+            "import time\n"
             "with ending_signals():\n"
             "    try:\n"
             "        import convert\n"
+            "        time.sleep(5)\n"   # the signal is raised once the import is done: here, within 20 ms
             "        print('lost')\n"
             "    except ImportError:\n"
             "        print('swallowed')\n"

@@ -9,13 +9,13 @@ worker pool must not be cut short by the first (signals_held: a pool left half-e
 finaliser). Nor may an import: a KeyboardInterrupt raised inside one is turned into an ImportError by a C extension
 that imports another (pybullet's numpy: "numpy._core.multiarray failed to import", a traceback) or swallowed by an
 `except ImportError` (the signal lost), so while ending_signals runs, a signal that comes during an import of the
-main thread takes effect when that import is done (_held_import). From the runner's first line (early_signals) to
+main thread takes effect once that import is done (its handler sees importlib's frames on the stack, holds it and
+looks again 20 ms later: SIGALRM, _retry; no cost to the ~40,000 imports of cached modules a run makes). From the runner's first line (early_signals) to
 its main(), a signal waits for main() (raise_pending). Torch-free: the runner imports this before its first line.
 """
 
 from __future__ import annotations
 
-import builtins
 import contextlib
 import os
 import signal
@@ -24,10 +24,11 @@ import threading
 
 ENDING = (signal.SIGTERM, signal.SIGHUP)   # the signals that end a run as Ctrl-C does
 # the process whose handlers raise Ended (a forked child inherits them: see _ended); "defer": the handler records a
-# signal in "pending" instead of raising it (before main(), and during an import); "imports": the main thread's
-# imports under way (_held_import)
-_RUNNER = {"pid": None, "defer": False, "pending": None, "imports": 0}
-_IMPORT = builtins.__import__
+# signal in "pending" instead of raising it (before main()); one that comes during an import waits there too
+_RUNNER = {"pid": None, "defer": False, "pending": None}
+# importlib's frames: a signal whose handler finds one of them on the main thread's stack came during an import
+_IMPORT_FILES = frozenset(("<frozen importlib._bootstrap>", "<frozen importlib._bootstrap_external>"))
+RETRY_S = 0.02   # a signal held during an import is raised this long after, if the import is done (SIGALRM)
 
 
 class UsageError(Exception):
@@ -47,6 +48,20 @@ def _interruption(signum: int) -> KeyboardInterrupt:
     return KeyboardInterrupt() if signum == signal.SIGINT else Ended(signum)
 
 
+def _importing(frame) -> bool:
+    """Whether the main thread's stack, from `frame` down, is inside an import (importlib's own frames)."""
+    while frame is not None:
+        if frame.f_code.co_filename in _IMPORT_FILES:
+            return True
+        frame = frame.f_back
+    return False
+
+
+def _hold(signum: int) -> None:
+    if _RUNNER["pending"] is None:   # the first one decides the exit code, as it would have
+        _RUNNER["pending"] = signum
+
+
 def _ended(signum, frame):
     if os.getpid() != _RUNNER["pid"]:   # a process forked before it reset its handlers: a pool's worker's way
         if signum == signal.SIGINT:     # (ignores Ctrl-C, dies of the others silently)
@@ -55,25 +70,24 @@ def _ended(signum, frame):
             signal.signal(signum, signal.SIG_DFL)
             os.kill(os.getpid(), signum)
         return
-    if _RUNNER["defer"] or _RUNNER["imports"]:
-        if _RUNNER["pending"] is None:   # the first one decides the exit code, as it would have
-            _RUNNER["pending"] = signum
+    if _RUNNER["defer"]:
+        _hold(signum)
+        return
+    if _importing(frame if frame is not None else sys._getframe(1)):
+        _hold(signum)
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)   # _retry: raised once the import is done
         return
     raise _interruption(signum)
 
 
-def _held_import(*args, **kwargs):
-    """builtins.__import__ while ending_signals runs: a signal during an import of the main thread is raised when
-    the outermost import is done (or has failed), never inside it (see the module's docstring)."""
-    if threading.get_ident() != threading.main_thread().ident:
-        return _IMPORT(*args, **kwargs)
-    _RUNNER["imports"] += 1
-    try:
-        return _IMPORT(*args, **kwargs)
-    finally:
-        _RUNNER["imports"] -= 1
-        if not _RUNNER["imports"] and not _RUNNER["defer"]:
-            raise_pending()
+def _retry(signum, frame):
+    """SIGALRM while ending_signals runs: the signal held during an import, raised if that import is done."""
+    if _RUNNER["pending"] is None or os.getpid() != _RUNNER["pid"] or _RUNNER["defer"]:
+        return
+    if _importing(frame):
+        signal.setitimer(signal.ITIMER_REAL, RETRY_S)
+        return
+    raise_pending()
 
 
 def raise_pending() -> None:
@@ -104,10 +118,10 @@ def how(e: KeyboardInterrupt) -> tuple[str, int]:
 
 @contextlib.contextmanager
 def ending_signals():
-    """SIGTERM and SIGHUP raise Ended, Ctrl-C KeyboardInterrupt, while the block runs, except during an import of
-    the main thread, after which they do (only the main thread may set handlers; one ignored, as under nohup, stays
-    ignored); the previous handlers afterwards. A signal recorded before (early_signals) waits for raise_pending,
-    which the block's owner calls where it can say its line."""
+    """SIGTERM and SIGHUP raise Ended, Ctrl-C KeyboardInterrupt, while the block runs; during an import of the main
+    thread, once that import is done (SIGALRM is the block's, for that). Only the main thread may set handlers; one
+    ignored, as under nohup, stays ignored; the previous handlers afterwards. A signal recorded before the block
+    (early_signals) waits for raise_pending, which the block's owner calls where it can say its line."""
     main = threading.current_thread() is threading.main_thread()
     handlers = {sig: signal.getsignal(sig) for sig in (signal.SIGINT, *ENDING)} if main else {}
     previous = {sig: h for sig, h in handlers.items() if h is not None}   # None: set outside Python, left as it is
@@ -115,17 +129,17 @@ def ending_signals():
     try:
         if main:
             _RUNNER["pid"], _RUNNER["defer"] = os.getpid(), False
-            builtins.__import__ = _held_import
+            previous[signal.SIGALRM] = signal.signal(signal.SIGALRM, _retry)
         for sig, handler in previous.items():
-            if handler is not signal.SIG_IGN:
+            if handler is not signal.SIG_IGN and sig != signal.SIGALRM:
                 signal.signal(sig, _ended)
         yield
     finally:
         if main:
-            builtins.__import__ = _IMPORT
+            signal.setitimer(signal.ITIMER_REAL, 0)
             _RUNNER["defer"] = defer
         for sig, handler in previous.items():
-            signal.signal(sig, handler)
+            signal.signal(sig, handler if handler is not None else signal.SIG_DFL)
 
 
 @contextlib.contextmanager
