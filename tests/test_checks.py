@@ -132,7 +132,7 @@ def test_settings_that_make_the_readings_or_the_knowledge_meaningless_are_refuse
     ("world.tank.gravity=0", "world.tank.gravity takes a number (float) > 0"),
     ("world.tank.water.gravity=-9.81", "world.tank.water.gravity takes a number (float) > 0"),
     ("world.tank.ball_rgb=[5, 0, 0]", "world.tank.ball_rgb takes an array of 3 numbers, each from 0 to 1"),
-    ("world.robot.arm_max_force=[-1, 1, 1, 1, 1, 1, 1, 1, 1, 1]", "each >= 0"),
+    ("world.robot.arm_max_force=[0, 1, 1, 1, 1, 1, 1, 1, 1, 1]", "each > 0, got world.robot.arm_max_force[0] = 0.0"),
 ])
 def test_a_value_out_of_its_meaning_is_refused_by_its_range(text, words):
     from train.common.config import parse_set

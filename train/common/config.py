@@ -183,9 +183,10 @@ RANGES = {
 }
 # an int field without an upper bound above (a count, a size): at most this, what a 64-bit tensor or generator holds
 MAX_INT = MAX_SEED - 1
-# bounds of each element of a flat tuple field: colours are RGB(A) fractions; a motor's force limit is a magnitude
+# bounds of each element of a flat tuple field: colours are RGB(A) fractions; an arm motor without force never
+# moves its joint (the object is never delivered, found at the first drop)
 ELEMENT_RANGES = {"world.tank.jar_rgba": FRACTION, "world.tank.water_rgba": FRACTION, "world.tank.ball_rgb": FRACTION,
-                  "world.robot.arm_max_force": NON_NEGATIVE}
+                  "world.robot.arm_max_force": POSITIVE}
 
 
 class ConfigError(Exception):
