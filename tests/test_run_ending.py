@@ -354,3 +354,23 @@ def test_a_signal_before_main_ends_the_run_in_one_line_and_writes_nothing(tmp_pa
     assert r.returncode == 128 + sig and r.stderr == f"train/run.py: interrupted{by} before the run started\n", \
         (r.returncode, r.stderr)
     assert not out.exists()
+
+
+def test_a_signal_held_during_an_import_waits_for_a_block_that_holds_signals(tmp_path):
+    """Raised once its import is done, but not inside a block that signals must not cut (signals_held: a pool's
+    start or end), which the code may enter before the held signal's retry comes."""
+    (tmp_path / "victim.py").write_text("import os, signal\nos.kill(os.getpid(), signal.SIGTERM)\n")
+    code = ("import sys, time\n"
+            f"sys.path.insert(0, {str(tmp_path)!r})\n"
+            "from train.common.exits import Ended, ending_signals, signals_held\n"
+            "with ending_signals():\n"
+            "    try:\n"
+            "        import victim\n"
+            "        with signals_held():\n"
+            "            time.sleep(0.3)\n"   # the retry comes 20 ms after the import: held until the block ends
+            "            print('held', flush=True)\n"
+            "        time.sleep(5)\n"
+            "    except Ended as e:\n"
+            "        print('ended', e.signum, flush=True)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout == f"held\nended {int(signal.SIGTERM)}\n", (r.stdout, r.stderr)

@@ -81,10 +81,12 @@ def _ended(signum, frame):
 
 
 def _retry(signum, frame):
-    """SIGALRM while ending_signals runs: the signal held during an import, raised if that import is done."""
-    if _RUNNER["pending"] is None or os.getpid() != _RUNNER["pid"] or _RUNNER["defer"]:
+    """SIGALRM while ending_signals runs: the signal held during an import, raised if that import is done, and if
+    nothing holds that signal meanwhile (signals_held, sigint_ignored: then once they are done)."""
+    pending = _RUNNER["pending"]
+    if pending is None or os.getpid() != _RUNNER["pid"] or _RUNNER["defer"]:
         return
-    if _importing(frame):
+    if _importing(frame) or signal.getsignal(pending) is not _ended:
         signal.setitimer(signal.ITIMER_REAL, RETRY_S)
         return
     raise_pending()
