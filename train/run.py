@@ -42,9 +42,9 @@ from train.common.exits import (UsageError, console, ending_signals, exit_now, f
                                 raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
 from train.runner.settings import (ABLATION_HELP, ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
-                                   MODEL_HELP, MODELS,
-                              adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
-                              load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
+                                   MODEL_HELP, MODELS, adopt_run, check_capacity, count_orders, gather_config,
+                                   load_objects_or_fail, load_run_objects, orders_arg, resolve_config, seed_arg,
+                                   world_kw)
 
 DEFAULT_OUT = "runs/run-<date-time>"
 
