@@ -27,13 +27,15 @@ al. 2014), out of those both did. The protocol's numbers were chosen on seeds 10
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from train.common import exits  # noqa: E402  signals: one line, exit code 128 + the signal, the workers ended
+if __name__ == "__main__":
+    exits.early_signals()
 
 from cli_args import at_least, count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
@@ -209,8 +211,12 @@ def main(argv=None) -> None:
     jobs = [(m, ab, k, s, a.subjects, list(tasks), a.aim, a.jar_objects, a.trials) for m, ab, k in conds
             for s in seeds]
     if a.workers > 1 and len(jobs) > 1:
-        with multiprocessing.get_context("fork").Pool(min(a.workers, len(jobs))) as pool:
+        from train.learning.sim_pool import end_pool, quiet_pool   # workers ignore Ctrl-C, die with this process
+        pool = quiet_pool(min(a.workers, len(jobs)), None, what="a battery worker")
+        try:
             done = dict(pool.imap_unordered(_job, jobs))
+        finally:
+            end_pool(pool)
     else:
         done = dict(map(_job, jobs))
     merged = {}
@@ -282,4 +288,11 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    run_main("battery", main)
+    with exits.ending_signals():
+        try:
+            exits.raise_pending()
+            run_main("battery", main)
+        except KeyboardInterrupt as e:
+            by, code = exits.how(e)
+            print(f"{exits.fresh_line()}battery: interrupted{by}", file=sys.stderr)
+            sys.exit(code)

@@ -290,8 +290,9 @@ def min_mass_g_for(spec: ObjectSpec, jar: JarSpec, config: ObjectsConfig = Objec
     return max(config.min_mass_g, config.min_mass_per_area_g_cm2 * a / (1.0 - a / jar.area_cm2))
 
 
-def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
-    """The closed-form yardstick: water displaced once the object is at rest in the jar (1 g/cm^3 water).
+def archimedes_cm3(spec: ObjectSpec, jar: JarSpec, water_density_g_cm3: float = WATER_DENSITY_G_CM3) -> float:
+    """The closed-form yardstick: water displaced once the object is at rest in the jar (1 g/cm^3 water, or the
+    world's water: sim.water.WaterConfig.density / 1000, which the runner passes).
 
     A floater displaces its mass; a sinker its volume, or only its submerged part when it stands on the bottom and
     sticks out of the water. One formula covers both: V = min(m / rho, S(L0 + V / A)), where S(L) is the volume of
@@ -300,7 +301,7 @@ def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
     For a prism that sticks out this is L = L0 / (1 - a/A), V = a L. (A floater in water too shallow to float it
     is grounded and displaces S(L) < m; no object of the default set comes near that.)
     """
-    m_over_rho = spec.mass_g / WATER_DENSITY_G_CM3
+    m_over_rho = spec.mass_g / water_density_g_cm3
     A, L0 = jar.area_cm2, jar.water_depth_cm
 
     def excess(v: float) -> float:  # decreasing in v; zero at the answer

@@ -439,3 +439,50 @@ def test_the_console_command_puts_the_repository_on_the_path_itself(tmp_path):
     r = subprocess.run([sys.executable, "-I", "-c", code, str(ROOT / "aesop_torch" / "cli.py")], cwd=tmp_path,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "usage: train/run.py" in r.stdout, r.stderr
+
+
+# -- the help and the resume messages (issue 47) ---------------------------------------------------------------------
+
+def test_the_help_lists_every_model_and_every_ablation_from_the_tables(capsys):
+    """--help is built from the tables (train/runner/settings.py), so a model or a part added is in it: each with
+    its line, and a part that not every model has says which do."""
+    from train import run as runner
+    from train.common.models import ABLATION_HELP, ABLATIONS, MODEL_HELP, MODELS
+    with pytest.raises(SystemExit):
+        runner.parse_args(["--help"])
+    text = "".join(capsys.readouterr().out.split())   # argparse wraps lines (and breaks at hyphens)
+    said = lambda t: "".join(t.split()) in text   # noqa: E731
+    parts = {p for m in MODELS for p in ABLATIONS[m]}
+    assert set(MODEL_HELP) >= set(MODELS) and set(ABLATION_HELP) >= parts, "a model or a part without its help line"
+    for m in MODELS:
+        assert said(f"{m}: {MODEL_HELP[m]}"), m
+    assert said("fit (contextual only: " + ABLATION_HELP["fit"]) and said("prior (extended only: ")
+    assert said("rules (" + ABLATION_HELP["rules"])   # every model has it: no "only"
+
+
+def test_resume_of_a_contextual_run_takes_its_own_ablation(tmp_path):
+    """The run's model comes from its run.json: --ablate fit, a part of the contextual model, agrees with a
+    contextual run's (it was refused as 'not a part of the paper model', the default, before run.json was read)."""
+    from train import run as runner
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "run.json").write_text(json.dumps({"objects": {}, "orders": "1", "physics": "cached", "overrides": {
+        "model": "contextual", "ablate": ["fit"], "seed": 0}}))
+    a = runner.parse_args(["--resume", "--out", str(out), "--ablate", "fit"])
+    assert (a.model, a.ablate) == ("contextual", ["fit"])
+
+
+def test_resume_without_a_checkpoint_says_to_start_again_without_it(tmp_path, capsys):
+    from sim.objects import parse_objects
+    from train import run as runner
+    out = tmp_path / "out"
+    out.mkdir()
+    objects = parse_objects({"train": [GOOD]})
+    (out / "run.json").write_text(json.dumps({"objects": objects.canonical(), "orders": "1", "physics": "cached",
+                                              "overrides": {"model": "paper", "ablate": [], "seed": 0}}))
+    assert runner.main(["--resume", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no checkpoint at" in err[0] and "start it again without --resume" in err[0], err
+    assert runner.main(["--resume", "--out", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "start the run without --resume" in err[0], err

@@ -2,7 +2,7 @@
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--config FILE.toml] [--set KEY=VALUE ...]
-                        [--model paper|extended] [--ablate rules|gating|prior ...]
+                        [--model paper|contextual|extended] [--ablate PART ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
 The model's and the world's config (train/common/config.py): the defaults, then the --config file, then each --set in
@@ -19,25 +19,32 @@ intact and --resume continues. A closed stdout (`>&-`): the run goes on without 
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
-import time
-from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+
+# Signals first: from here on a Ctrl-C, SIGTERM or SIGHUP waits for main() to say its one line (exits.early_signals)
+from train.common import exits  # noqa: E402
+
+if __name__ == "__main__":
+    exits.early_signals()
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 # Only light imports up here: torch takes about a second to import; everything the first line needs is checked
 # without it. The parts: train/runner/settings.py (the settings and the config), train/runner/out_dir.py (--out, its lock),
 # train/common/exits.py (signals, the one line, exit codes), train/runner/loop.py (the run itself).
 from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
-                           sigint_ignored)
+                                raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.common.models import MODELS, check_capacity  # noqa: E402
+from train.common.models import ABLATION_HELP, ABLATIONS, MODEL_HELP, MODELS, check_capacity  # noqa: E402
 from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
-                              adopt_run, count_orders, gather_config, load_objects_or_fail,
-                              load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
+                                   adopt_run, count_orders, gather_config, load_objects_or_fail,
+                                   load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
 DEFAULT_OUT = "runs/run-<date-time>"
 
@@ -64,6 +71,23 @@ keys model, ablate and seed): when the file and a flag both give a value, the fl
 the wrong type or out of range: one line, exit 2, nothing written. CONTRACTS.md has the details."""
 
 
+def model_help() -> str:
+    """--model's help from the tables (train/common/models.py MODELS, MODEL_HELP): every model, so none is left out."""
+    return "; ".join(f"{m}: {MODEL_HELP.get(m, 'see CONTRACTS.md')}" for m in MODELS) + \
+        " (default: paper, or the config's model)"
+
+
+def ablate_help() -> str:
+    """--ablate's help from the tables (ABLATIONS, ABLATION_HELP): each part, and the models that have it."""
+    parts = list(dict.fromkeys(p for m in MODELS for p in ABLATIONS[m]))
+    said = []
+    for part in parts:
+        having = [m for m in MODELS if part in ABLATIONS[m]]
+        only = "" if len(having) == len(MODELS) else f"{', '.join(having)} only: "
+        said.append(f"{part} ({only}{ABLATION_HELP.get(part, 'see CONTRACTS.md')})")
+    return "switch a part off (repeatable; replaces the config's ablate): " + ", ".join(said)
+
+
 def parse_args(argv):
     ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter,
                 epilog=CONFIG_HELP)
@@ -86,14 +110,8 @@ def parse_args(argv):
                     help="set one config key (repeatable, applied after --config, in order), e.g. "
                          "rules.uncertain_decay=1.0, memory.max_recalls=none, model=extended, world.mass_noise_g=5, "
                          "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
-    ap.add_argument("--model", choices=MODELS, default=None,
-                    help="paper: the paper's mechanism (incremental rules, knowledge-gated recall, a weighted average "
-                         "of recalled rewards); extended: evidence-set rules with contexts and a readout fitted with "
-                         "the task's physics priors (default: paper, or the config's model)")
-    ap.add_argument("--ablate", action="append", default=None, metavar="PART",
-                    help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
-                         "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
-                         "physics priors)")
+    ap.add_argument("--model", choices=MODELS, default=None, help=model_help())
+    ap.add_argument("--ablate", action="append", default=None, metavar="PART", help=ablate_help())
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")
@@ -126,10 +144,11 @@ def main(argv=None) -> int:
 
 
 def _main(argv=None) -> int:
-    from train.runner import loop as run_loop
-
+    run_loop = None
     ran = None   # the run's exit code once it has returned
     try:
+        raise_pending()   # a signal that came before main() (early_signals)
+        from train.runner import loop as run_loop
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
             if args.objects is not None and _is_task_file(args.objects):
@@ -166,7 +185,8 @@ def _main(argv=None) -> int:
     except KeyboardInterrupt as e:
         by, code = how(e)
         with sigint_ignored():
-            run_loop.close_quietly()
+            if run_loop is not None:
+                run_loop.close_quietly()
             when = "before the run started" if ran is None else f"as the run ended (exit code {ran} otherwise)"
             print(f"{fresh_line()}train/run.py: interrupted{by} {when}", file=sys.stderr)
         return code
@@ -218,6 +238,7 @@ def run_task(args) -> int:
 def console_main() -> None:
     """`python train/run.py` and the console command aesop-run: the run, then its exit without the interpreter's
     teardown (everything is written and closed; train/common/exits.py exit_now)."""
+    exits.early_signals()   # aesop-run's (the script's already, before its imports)
     exit_now(main())
 
 

@@ -7,6 +7,24 @@ from __future__ import annotations
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
              "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
+# what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
+# and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
+MODEL_HELP = {
+    "paper": "the paper's mechanism (rules that edit the pathway strengths one firing at a time, knowledge-gated "
+             "recall, a recall-weighted average of the recalled rewards)",
+    "contextual": "the paper's parts, its rules' knowledge kept per fate the robot sees (what decides the fate, what "
+                  "decides the reward among floaters and among sinkers), shape split into fill and elongation, a "
+                  "recall in two steps and a local fit over the recalled episodes of the expected fate",
+    "extended": "evidence-set rules with floating / sinking contexts and a readout fitted with the task's physics "
+                "priors",
+}
+ABLATION_HELP = {
+    "rules": "no rule fires: the strengths stay 1, the knowledge unknown",
+    "gating": "the memory's cue ignores the strengths: knowledge no longer reaches recall",
+    "context": "no fates: one set of strengths judged on the reward, one recall",
+    "fit": "the paper's average of the recalled rewards of the expected fate instead of the local fit",
+    "prior": "the readout's fit without its physics priors",
+}
 
 
 def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}={value}") -> str | None:

@@ -102,7 +102,9 @@ def resume_experiment(args, objects):
 
     ckpt_path = args.out / "checkpoints" / "latest.pt"
     if not ckpt_path.is_file():
-        raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
+        raise UsageError(f"--resume: no checkpoint at {ckpt_path}: the run ended before it wrote one, so there is "
+                         f"nothing to continue; start it again without --resume (with another --out, or remove "
+                         f"{args.out})")
     try:
         state = load(ckpt_path)
     except CheckpointError as e:
@@ -186,6 +188,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     physics = _OPEN["physics"] = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui,
                                                              **world_kw(args))   # main() made it
     specs = {o.name: o for o in objects.train + objects.probe}
+    density = args.run_config.world.tank.water.density / 1000.0   # g/cm^3: Archimedes' figure in the world's water
     # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
     # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
     # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
@@ -228,7 +231,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             if name in on_stands:
                 probe_drops[name], m = outcome_record(m), m.measurement
             exp.probes[name] = {"measurement": plain_measurement(m),
-                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
+                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar, density))}
         checkpoint()
     # the goal trials' multi-drop sequences a planner would drop, simulated while the workers would idle (the
     # agents learn here, Figure 2 and the trials follow): a well-taught agent drops them; others are simulated then

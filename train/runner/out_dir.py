@@ -30,7 +30,8 @@ def check_out(out: Path, resume: bool) -> None:
     refuse_unusable(out)
     if resume:
         if not out.is_dir():
-            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist)")
+            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist): "
+                             "nothing to continue; start the run without --resume")
     elif refuse_uncreatable(out) == out and holds_a_run(out):
         busy = lock_holder(out)
         raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else

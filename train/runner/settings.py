@@ -79,7 +79,8 @@ def gather_config(a) -> None:
     if a.seed is not None:
         put("seed", a.seed, "--seed")
     a.overrides, a.origins = overrides, origins
-    run_level(a)
+    if not getattr(a, "resume", False):   # --resume: once the run's own model is known (adopt_run)
+        run_level(a)
 
 
 def run_level(a) -> None:
@@ -112,6 +113,7 @@ def adopt_run(a) -> None:
 
     path = a.out / RUN_NAME
     if path.is_symlink() or not path.is_file():
+        run_level(a)   # a run from before run.json: the flags as given
         return
     try:
         from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
