@@ -20,7 +20,7 @@ OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows o
 AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 
 MODELS = ("paper", "contextual", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "boundary"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
@@ -123,6 +123,11 @@ class AgentConfig:
     # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
     # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
     fate_ridge: float = 1e-2
+    # contextual: the ridge of its fate boundary (fate_boundary.py), fitted over the maps' decoded values, where size
+    # and weight span 0..1 for 3.4 and 7.6 log units: a boundary as sharp as fate_ridge's needs slopes ~50x larger,
+    # so a ridge ~100x smaller. The probes' fate after 24 objects with the right knowledge given: right 75 / 79 /
+    # 81 % at 1e-2 / 1e-3 / 1e-4 (tuning seeds 1004-1009); a 5 cm cube's fate flips at 141 g at 1e-4 (125 g true)
+    fate_boundary_ridge: float = 1e-4
     # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
     # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
     # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
@@ -144,7 +149,9 @@ class AgentConfig:
     # parts switched off, for ablations (ABLATIONS): "rules" (no rule ever fires: the strengths stay at 1, the
     # knowledge unknown), "gating" (the memory's cue ignores the strengths: knowledge no longer reaches recall),
     # "prior" (extended only: the readout's fit without its physics priors: free slopes, size as a length, no volume
-    # feature, a fate boundary over the properties)
+    # feature, a fate boundary over the properties); contextual only: "context" (one set of strengths, no
+    # fates seen), "fit" (the reward read as the recall-weighted average) and "boundary" (the expected fate by the
+    # recalled fates' recall-weighted vote, not a boundary fitted over their perceived properties: fate_boundary.py)
     ablate: tuple = ()
     # the paper model's readout weighs each recalled episode by its recall strength to this power. A recall brings
     # back nearly every stored episode (a cue touches most of them a little), so at power 1 the average is close to

@@ -67,6 +67,7 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual": ("contextual", ()), "contextual -rules": ("contextual", ("rules",)),
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
+          "contextual -boundary": ("contextual", ("boundary",)),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")

@@ -2,7 +2,7 @@
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--config FILE.toml] [--set KEY=VALUE ...]
-                        [--model paper|extended] [--ablate rules|gating|prior ...]
+                        [--model paper|contextual|extended] [--ablate rules|gating|prior|context|fit|boundary ...]
                         [--physics cached|per-episode] [--frames] [--gui]
 
 The model's and the world's config (train/config.py): the defaults, then the --config file, then each --set in
@@ -92,7 +92,9 @@ def parse_args(argv):
     ap.add_argument("--ablate", action="append", default=None, metavar="PART",
                     help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
                          "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
-                         "physics priors)")
+                         "physics priors); contextual only: context (one set of strengths, no fates seen), fit (the "
+                         "reward as the recall-weighted average), boundary (the expected fate by the recalled fates' "
+                         "vote, not a boundary fitted over their perceived properties)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")
