@@ -85,8 +85,10 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
                          ) -> tuple[dict, dict]:
     """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics. For tests, benchmarks and
     agents run without the simulator. sensor=None: every object displaces exactly its Archimedes volume and is
-    measured exactly as the file describes it. With a `sim.sensor_model.SensorModel`, measurements and outcomes
-    carry that model's noise, drawn per object from (seed, name) as the world draws a drop's sensor noise. The ball
+    measured exactly as the file describes it (its fate the engine's: denser than water). With a
+    `sim.sensor_model.SensorModel`, measurements and outcomes carry that model's noise, drawn per object from (seed,
+    name) as the world draws a drop's sensor noise, and the fate is the one the robot sees (SensorModel.sees_sinking,
+    measured on the physics path: an object barely denser than water is seen floating). The ball
     counts as reached after more than reachable_above_cm3, a stand-in for the reach check (in the default jar it
     lies between 14 and 365 cm^3)."""
     from sim.objects import archimedes_cm3
@@ -102,7 +104,8 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         m, v = sensed(s)
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
-                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks),
+                            "goal_before": False, "goal_after": v > reachable_above_cm3,
+                            "sank": sensor.sees_sinking(s) if sensor is not None else bool(s.sinks),
                             "true": s.true_values()}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
