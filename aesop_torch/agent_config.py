@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 from .encoders import PROPERTIES, SPLIT_PROPERTIES, EncoderConfig
+from .exploration import EXPLORE
 from .hub import HubConfig
 from .memory import MemoryConfig
 from .rules import RulesConfig
@@ -188,6 +189,10 @@ class AgentConfig:
     # strongest counts 3 % of it, and the ones past the first few barely count; recall is most of an episode's time
     # (a whole recall settles the network once per episode it brings back)
     fate_recalls: int = 8
+    # who chooses the next object (exploration.EXPLORE): "teacher", the order given (the paper's); "active", the
+    # robot, the object on the stand whose comparison with a remembered episode would be cleanest for what is still
+    # unknown (aesop_torch/exploration.py). Off by default: the paper's teacher presents the objects
+    explore: str = "teacher"
     seed: int = 0
 
     @classmethod
@@ -239,6 +244,8 @@ class AgentConfig:
         if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0 or not self.fate_recalls >= 1:
             raise ValueError(f"AgentConfig.compare_floor must be in 0..1, fit_sharpness > 0 and fate_recalls >= 1, "
                              f"got {self.compare_floor}, {self.fit_sharpness}, {self.fate_recalls}")
+        if self.explore not in EXPLORE:
+            raise ValueError(f"AgentConfig.explore must be one of {', '.join(EXPLORE)}, got {self.explore!r}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)

@@ -194,7 +194,12 @@ class Experiment:
         return self.t >= self.n_episodes
 
     def step(self, world_episode) -> list[dict]:
-        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record."""
+        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record. With
+        AgentConfig.explore "active" each order's agent chooses its object among those its order has not yet
+        presented (aesop_torch/exploration.py), looking at each as its cached outcome measured it, and the order is
+        rewritten from t to what was chosen (it is checkpointed: a resumed run goes on from it)."""
+        if self.config.explore == "active":
+            self._choose()
         names = [self.train_names[o[self.t]] for o in self.orders]
         outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
         meas = stack_measurements([o["measurement"] for o in outs])
@@ -227,6 +232,19 @@ class Experiment:
             new.append(rec)
         self.t += 1
         return new
+
+    def _choose(self) -> None:
+        """Each order's agent chooses its object for episode t (exploration.choose_in_order), from the objects as
+        their cached outcomes measured them (cached physics: every train object was dropped once up front)."""
+        from aesop_torch.exploration import choose_in_order
+        missing = [n for n in self.train_names if n not in self.outcomes]
+        if missing:
+            raise ValueError(f"explore 'active' looks at every object on the stand, but {missing[0]!r} has no "
+                             "measured outcome (it needs cached physics: each object measured once up front)")
+        seen = self.agent.activities(stack_measurements([self.outcomes[n]["measurement"] for n in self.train_names]))
+        orders = torch.tensor(self.orders, dtype=torch.long)
+        choose_in_order(self.agent, *seen, orders, self.t)
+        self.orders = orders.tolist()
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """(B,) what each order's agent expects one object to displace, in cm^3. The object: what the robot
