@@ -71,12 +71,16 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
           "contextual -boundary": ("contextual", ("boundary",)),
-          "contextual +active": ("contextual", ()),
+          "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
 # conditions that differ from their model by a config key, not an ablation: the robot chooses its next object
 # (AgentConfig.explore, aesop_torch/exploration.py) instead of the teacher's order
-OVERRIDES = {"contextual +active": {"explore": "active"}}
+OVERRIDES = {"contextual +active": {"explore": "active"},
+             # size read as the largest extent, not the cube root of the bounding box's volume (docs/model.md)
+             "contextual size=largest": {"encoder.size_from": "largest"}}
+# run only when --conditions names them
+ON_REQUEST = ("contextual size=largest",)
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
@@ -146,7 +150,10 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
             errs[n] = peer_errors(meas, ep["observed_cm3"], pmeas, truth, orders, n, seed_)[condition]
         return {"errors": errs}
     model, ablate, given = GIVEN[condition] if condition in GIVEN else (*MODELS[condition], None)
-    cfg = AgentConfig.named(model, ablate=ablate, seed=seed_, **OVERRIDES.get(condition, {}))
+    cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
+    if condition in OVERRIDES:
+        from train.config import apply_overrides
+        cfg = apply_overrides(cfg, OVERRIDES[condition])
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)
     if given is not None and torch.tensor(given).ndim == 2:   # per context: the contextual rules' strengths
@@ -258,7 +265,7 @@ def main():
     ap.add_argument("--life-objects", type=count, default=230, help="objects in a life")
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
-    ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
+    ap.add_argument("--conditions", default=",".join([*(c for c in MODELS if c not in ON_REQUEST), *PEERS]),
                     help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS, *GIVEN]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
     record_flag(ap)
