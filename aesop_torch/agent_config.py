@@ -275,4 +275,7 @@ class AgentConfig:
         if d.get("model") == "extended":   # a config from before the models were made of parts
             d.setdefault("learning", "evidence")
             d.setdefault("readout", "prior_fit")
+        if d.get("model") == "contextual" and "fate_boundary_ridge" not in d:
+            # a contextual agent from before the fate boundary learned with the recalled fates' vote: it goes on so
+            d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "boundary"]))
         return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})

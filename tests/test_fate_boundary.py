@@ -81,3 +81,14 @@ def test_the_boundary_ablation_is_named_in_the_runner_help():
         with contextlib.redirect_stdout(out):
             parse_args(["--help"])
     assert "boundary" in out.getvalue()
+
+
+def test_a_contextual_config_from_before_the_boundary_keeps_the_vote_it_learned_with():
+    old = AgentConfig.contextual().to_dict()
+    del old["fate_boundary_ridge"]
+    assert AgentConfig.from_dict(old).ablate == ("boundary",)
+    assert AgentConfig.from_dict(AgentConfig.contextual().to_dict()).ablate == ()
+    # the paper model has no boundary to keep
+    paper = AgentConfig.paper().to_dict()
+    del paper["fate_boundary_ridge"]
+    assert AgentConfig.from_dict(paper).ablate == ()
