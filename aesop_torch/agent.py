@@ -305,8 +305,8 @@ class Agent(nn.Module):
         properties live for the fate (fate_boundary.expected_fate), every recalled episode counted once (a boundary
         needs its far examples as much as its near ones: weighted by recall strength to the power fit_sharpness,
         the probes' fate was right 68 % of the time after 24 objects with the right knowledge given, counted once
-        75 %; tuning seeds 1004-1009); 0.5 where no fate was seen. A property is live for the fate while its fate pathway shows it and the two reward contexts have
-        not both eliminated it (then it matters nowhere: colour)."""
+        75 %; tuning seeds 1004-1009); 0.5 where no fate was seen. A property is live for the fate while its fate
+        pathway shows it and the two reward contexts have not both eliminated it (then it matters nowhere: colour)."""
         fates = self._fates(recall)
         recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes)))
         w = (recall.strength * recall.valid > 0).double()

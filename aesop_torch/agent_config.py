@@ -239,8 +239,8 @@ class AgentConfig:
             raise ValueError(f"AgentConfig.learning must be one of {', '.join(LEARNING)} and readout one of "
                              f"{', '.join(READOUTS)}, got {self.learning!r}, {self.readout!r}")
         if self.readout == "prior_fit" and self.encoder.size_from != "cube_root":
-            raise ValueError(f"AgentConfig.readout 'prior_fit' reads size as the cube root of the bounding box's volume "
-                             f"(its prior is volume = fill x size^3), not as {self.encoder.size_from!r}")
+            raise ValueError(f"AgentConfig.readout 'prior_fit' reads size as the cube root of the bounding box's "
+                             f"volume (its prior is volume = fill x size^3), not as {self.encoder.size_from!r}")
         if self.readout == "prior_fit" and tuple(self.encoder.properties) != PROPERTIES:
             raise ValueError(f"AgentConfig.readout 'prior_fit' reads the paper's four properties {PROPERTIES} (its "
                              f"priors are on shape's fill and size as a length), not {tuple(self.encoder.properties)}")

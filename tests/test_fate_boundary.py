@@ -1,5 +1,5 @@
-"""The contextual model's expected fate from a boundary fitted over the recalled episodes (aesop_torch/fate_boundary.py),
-and the recall-weighted vote it replaces kept as the `boundary` ablation."""
+"""The contextual model's expected fate from a boundary fitted over the recalled episodes
+(aesop_torch/fate_boundary.py), and the recall-weighted vote it replaces kept as the `boundary` ablation."""
 
 import pytest
 import torch
