@@ -122,3 +122,12 @@ def test_the_runner_takes_explore_as_a_flag_and_keeps_it_in_run_json(tmp_path):
     assert run.resolve_config(args, objects).agent.explore == "active"
     default = run.parse_args(["--out", str(tmp_path / "other")])
     assert "explore" not in default.overrides
+
+
+def test_active_exploration_with_per_episode_physics_is_refused_in_one_line(tmp_path, capsys):
+    from train import run
+    out = tmp_path / "out"
+    code = run.main(["--explore", "active", "--physics", "per-episode", "--out", str(out)])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code == 2 and len(err) == 1 and "--explore active" in err[0] and "per-episode" in err[0], err
+    assert not out.exists()
