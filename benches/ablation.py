@@ -81,6 +81,7 @@ OVERRIDES = {"contextual +active": {"explore": "active"},
              "contextual size=largest": {"encoder.size_from": "largest"}}
 # run only when --conditions names them
 ON_REQUEST = ("contextual size=largest",)
+DEFAULT_AGENTS = [c for c in MODELS if c not in ON_REQUEST]   # the agent conditions run by default (ablation.toml)
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
@@ -265,7 +266,7 @@ def main():
     ap.add_argument("--life-objects", type=count, default=230, help="objects in a life")
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
-    ap.add_argument("--conditions", default=",".join([*(c for c in MODELS if c not in ON_REQUEST), *PEERS]),
+    ap.add_argument("--conditions", default=",".join([*DEFAULT_AGENTS, *PEERS]),
                     help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS, *GIVEN]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
     record_flag(ap)
