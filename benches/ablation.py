@@ -8,6 +8,9 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 (8 probes), and lives of 230 train objects in one order each (16 probes). Conditions:
 
 - paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
+- contextual and its ablations (-rules, -gating, -context, -fit, -boundary: the expected fate by the recalled fates'
+  vote instead of a fitted boundary), and contextual +active: the robot chooses its next object (`explore = "active"`,
+  aesop_torch/exploration.py) from the teacher's first;
 - extended, extended -rules, extended -prior (its readout without the physics priors);
 - on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
   rules off, what its readout can do when the knowledge is right;
@@ -68,8 +71,18 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual": ("contextual", ()), "contextual -rules": ("contextual", ("rules",)),
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
+          "contextual -boundary": ("contextual", ("boundary",)),
+          "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
+# conditions that differ from their model by a config key, not an ablation: the robot chooses its next object
+# (AgentConfig.explore, aesop_torch/exploration.py) instead of the teacher's order
+OVERRIDES = {"contextual +active": {"explore": "active"},
+             # size read as the largest extent, not the cube root of the bounding box's volume (docs/model.md)
+             "contextual size=largest": {"encoder.size_from": "largest"}}
+# run only when --conditions names them
+ON_REQUEST = ("contextual size=largest",)
+DEFAULT_AGENTS = [c for c in MODELS if c not in ON_REQUEST]   # the agent conditions run by default (ablation.toml)
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
@@ -140,6 +153,9 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
         return {"errors": errs}
     model, ablate, given = GIVEN[condition] if condition in GIVEN else (*MODELS[condition], None)
     cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
+    if condition in OVERRIDES:
+        from train.config import apply_overrides
+        cfg = apply_overrides(cfg, OVERRIDES[condition])
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)
     if given is not None and torch.tensor(given).ndim == 2:   # per context: the contextual rules' strengths
@@ -148,8 +164,12 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     elif given is not None:
         agent.hub.strength[:, :len(given)] = torch.tensor(given)
     errs = {}
+    active = cfg.explore == "active"
+    if active:   # the robot chooses its next object (as train/sweep.py run_cell)
+        from aesop_torch.exploration import choose_in_order
+        seen = agent.activities(meas)
     for t in range(n_train):
-        obj = orders[:, t]
+        obj = choose_in_order(agent, *seen, orders, t) if active else orders[:, t]
         agent.step({k: v[obj] for k, v in meas.items()}, ep["observed_cm3"][obj], ep["goal_before"][obj],
                    ep["goal_after"][obj], sank=ep["sank"][obj])
         if t + 1 in checks:
@@ -168,7 +188,8 @@ GROUPS = {"8": "sets of 8", "24": "sets of 24", "life": "lives"}
 def sweep_doc(conditions, plan, first_seed: int) -> dict:
     """The agent conditions and sets of this run as a sweep file (benches/ablation.toml at the defaults)."""
     return {"world": "closed_form",
-            "conditions": [{"name": c, "model": MODELS[c][0], "ablate": list(MODELS[c][1])} for c in conditions],
+            "conditions": [{"name": c, "model": MODELS[c][0], "ablate": list(MODELS[c][1]),
+                            **({"overrides": OVERRIDES[c]} if c in OVERRIDES else {})} for c in conditions],
             "sets": [{"name": GROUPS[kind], "generate": {"seeds": [first_seed, first_seed + n_sets], "train": n_train,
                                                          "probe": n_probe, "pairs": True},
                       "orders": n_orders, "checks": list(checks)}
@@ -246,7 +267,7 @@ def main():
     ap.add_argument("--life-objects", type=count, default=230, help="objects in a life")
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
-    ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
+    ap.add_argument("--conditions", default=",".join([*DEFAULT_AGENTS, *PEERS]),
                     help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS, *GIVEN]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
     record_flag(ap)

@@ -56,10 +56,10 @@ def _toml(doc: dict) -> str:
 def test_the_benchs_defaults_are_its_sweep_file(ablation):
     """benches/ablation.toml is the bench at its defaults: the same resolved spec, so the same cells."""
     plan = [("8", 30, 8, 8, 24, (8,)), ("24", 10, 24, 8, 24, (8, 24)), ("life", 8, 230, 16, 1, (8, 24, 64, 230))]
-    mine, cells = sweep_spec.resolve(ablation.sweep_doc(list(ablation.MODELS), plan, 0), ROOT)
+    mine, cells = sweep_spec.resolve(ablation.sweep_doc(ablation.DEFAULT_AGENTS, plan, 0), ROOT)
     shipped, shipped_cells = sweep_spec.load_sweep(BENCHES / "ablation.toml")
     assert mine["conditions"] == shipped["conditions"] and mine["sets"] == shipped["sets"]
-    assert sorted(c["id"] for c in cells) == sorted(c["id"] for c in shipped_cells) and len(cells) == len(ablation.MODELS) * 48
+    assert sorted(c["id"] for c in cells) == sorted(c["id"] for c in shipped_cells) and len(cells) == len(ablation.DEFAULT_AGENTS) * 48
 
 
 def test_the_benchs_rows_and_figures_are_the_sweeps(tmp_path, ablation, local_ray, capsys):

@@ -3,7 +3,7 @@
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--config FILE.toml] [--set KEY=VALUE ...]
                         [--model paper|contextual|extended] [--ablate PART ...]
-                        [--physics cached|per-episode] [--frames] [--gui]
+                        [--explore teacher|active] [--physics cached|per-episode] [--frames] [--gui]
 
 The model's and the world's config (train/common/config.py): the defaults, then the --config file, then each --set in
 order, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed): a later value wins, so a
@@ -112,6 +112,10 @@ def parse_args(argv):
                          "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
     ap.add_argument("--model", choices=MODELS, default=None, help=model_help())
     ap.add_argument("--ablate", action="append", default=None, metavar="PART", help=ablate_help())
+    ap.add_argument("--explore", choices=("teacher", "active"), default=None,
+                    help="who chooses the next object: teacher (the order given) or active (the robot: the object "
+                         "on the stand whose comparison with a remembered episode would be cleanest for what is "
+                         "still unknown; cached physics only) (default: teacher, or the config's explore)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")

@@ -110,7 +110,7 @@ RANGES = {
     "rules.growth_step": NON_NEGATIVE, "rules.uncertain_floor": NON_NEGATIVE,   # uncertain_decay, contradiction_rel:
     "rules.same_abs_cm3": NON_NEGATIVE, "rules.same_rel": NON_NEGATIVE,          # fractions (below)
     "rules.contradiction_abs_cm3": NON_NEGATIVE, "retro_floor": NON_NEGATIVE, "readout_ridge": NON_NEGATIVE,
-    "fate_ridge": NON_NEGATIVE,
+    "fate_ridge": NON_NEGATIVE, "fate_boundary_ridge": NON_NEGATIVE,
     # a standard deviation; the readout divides by these two
     "felt_mass_noise_g": NON_NEGATIVE, "readout_rel_precision": POSITIVE, "readout_huber": POSITIVE,
     # the world: standard deviations of the senses' noise (numpy refuses a negative scale)

@@ -5,7 +5,7 @@ originals are aesop_torch.agent.MODELS and .ABLATIONS; tests/test_sweep.py holds
 from __future__ import annotations
 
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "boundary"),
              "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
 # and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
@@ -24,6 +24,8 @@ ABLATION_HELP = {
     "context": "no fates: one set of strengths judged on the reward, one recall",
     "fit": "the paper's average of the recalled rewards of the expected fate instead of the local fit",
     "prior": "the readout's fit without its physics priors",
+    "boundary": "the expected fate from the recall-weighted vote of the recalled fates instead of a boundary fitted "
+                "over them",
 }
 
 

@@ -85,8 +85,10 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
                          ) -> tuple[dict, dict]:
     """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics. For tests, benchmarks and
     agents run without the simulator. sensor=None: every object displaces exactly its Archimedes volume and is
-    measured exactly as the file describes it. With a `sim.sensor_model.SensorModel`, measurements and outcomes
-    carry that model's noise, drawn per object from (seed, name) as the world draws a drop's sensor noise. The ball
+    measured exactly as the file describes it (its fate the engine's: denser than water). With a
+    `sim.sensor_model.SensorModel`, measurements and outcomes carry that model's noise, drawn per object from (seed,
+    name) as the world draws a drop's sensor noise, and the fate is the one the robot sees (SensorModel.sees_sinking,
+    measured on the physics path: an object barely denser than water is seen floating). The ball
     counts as reached after more than reachable_above_cm3, a stand-in for the reach check (in the default jar it
     lies between 14 and 365 cm^3)."""
     from sim.objects import archimedes_cm3
@@ -102,7 +104,8 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         m, v = sensed(s)
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
-                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks),
+                            "goal_before": False, "goal_after": v > reachable_above_cm3,
+                            "sank": sensor.sees_sinking(s) if sensor is not None else bool(s.sinks),
                             "true": s.true_values()}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
@@ -191,7 +194,12 @@ class Experiment:
         return self.t >= self.n_episodes
 
     def step(self, world_episode) -> list[dict]:
-        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record."""
+        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record. With
+        AgentConfig.explore "active" each order's agent chooses its object among those its order has not yet
+        presented (aesop_torch/exploration.py), looking at each as its cached outcome measured it, and the order is
+        rewritten from t to what was chosen (it is checkpointed: a resumed run goes on from it)."""
+        if self.config.explore == "active":
+            self._choose()
         names = [self.train_names[o[self.t]] for o in self.orders]
         outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
         meas = stack_measurements([o["measurement"] for o in outs])
@@ -224,6 +232,19 @@ class Experiment:
             new.append(rec)
         self.t += 1
         return new
+
+    def _choose(self) -> None:
+        """Each order's agent chooses its object for episode t (exploration.choose_in_order), from the objects as
+        their cached outcomes measured them (cached physics: every train object was dropped once up front)."""
+        from aesop_torch.exploration import choose_in_order
+        missing = [n for n in self.train_names if n not in self.outcomes]
+        if missing:
+            raise ValueError(f"explore 'active' looks at every object on the stand, but {missing[0]!r} has no "
+                             "measured outcome (it needs cached physics: each object measured once up front)")
+        seen = self.agent.activities(stack_measurements([self.outcomes[n]["measurement"] for n in self.train_names]))
+        orders = torch.tensor(self.orders, dtype=torch.long)
+        choose_in_order(self.agent, *seen, orders, self.t)
+        self.orders = orders.tolist()
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """(B,) what each order's agent expects one object to displace, in cm^3. The object: what the robot

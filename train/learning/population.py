@@ -241,6 +241,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         # as Experiment: an agent encodes at most one episode and one object per episode
         config.memory.max_episodes = min(config.memory.max_episodes, n)
         config.hub.max_assemblies = min(config.hub.max_assemblies, n)
+        if config.explore == "active":   # the agents choose their own objects: no prefixes to share
+            return _run_active(train_names, probe_names, order_t, outcomes, probes, config, chunk, progress, curves,
+                               t0)
         root = Agent(config, batch=1)
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
@@ -272,6 +275,68 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     }
     if curves:
         out["curves"] = {"probe_rel_error": walk.curves(errors)}
+    return out
+
+
+def _run_active(train_names, probe_names, orders: torch.Tensor, outcomes: dict, probes: dict, config: AgentConfig,
+                chunk: int, progress, curves: bool, t0: float) -> dict:
+    """run_population's answer when the robot chooses its next object (AgentConfig.explore "active",
+    aesop_torch/exploration.py): what comes next depends on what the agent learned, not on the order's prefix, so
+    the orders (the teacher's first object, and the tie-breaks) run side by side in pieces of `chunk`, each agent
+    stepping the object it chose, as Experiment does. Same keys as run_population's answer; "chosen_orders" holds
+    the orders as the agents made them."""
+    from aesop_torch.exploration import choose_in_order
+    N, n = orders.shape
+    walk = _Walk(train_names, probe_names, outcomes, probes, orders[:1], chunk, None, merge=False, curves=False)
+    keys, errors, preds, chosen, curve = [], [], [], [], []
+    step_s = probe_s = 0.0
+    for lo in range(0, N, chunk):
+        part = orders[lo:lo + chunk].clone()
+        agent = Agent(config, batch=len(part))
+        if lo == 0:
+            walk.perceive(agent)
+        errs_t = []
+        for t in range(n):
+            tic = time.perf_counter()
+            obj = choose_in_order(agent, walk.acts, walk.present, part, t)
+            agent.step({k: v[obj] for k, v in walk.meas.items()}, walk.observed[obj], walk.before[obj],
+                       walk.after[obj], sank=None if walk.sank is None else walk.sank[obj],
+                       perceived=(walk.acts[obj], walk.present[obj]))
+            step_s += time.perf_counter() - tic
+            if curves and t + 1 < n:
+                tic = time.perf_counter()
+                errs_t.append(median_rel_errors(walk._probe_predictions(agent), walk.truth))
+                probe_s += time.perf_counter() - tic
+        tic = time.perf_counter()
+        pred = walk._probe_predictions(agent)
+        probe_s += time.perf_counter() - tic
+        preds.append(pred)
+        keys += knowledge_keys(agent.rules.state)
+        errors += [None if e is None else round(e, 4) for e in median_rel_errors(pred, walk.truth)]
+        chosen += part.tolist()
+        curve.append(errs_t)
+        if progress is not None:
+            progress(min(lo + chunk, N), N)
+    common, fraction, counts = agreement(keys)
+    out = {"orders": N, "final_knowledge": keys, "final_probe_rel_error": errors,
+           "final_probe_cm3": torch.cat(preds), "most_common_knowledge": common, "agree_fraction": fraction,
+           "knowledge_counts": counts, "agent_steps": N * n, "distinct_recalls": 0, "nodes_per_level": [N] * n,
+           "steps_per_level": [N] * n, "distinct_final_states": len(counts), "chosen_orders": chosen,
+           "timing_s": {"setup": 0.0, "steps": round(step_s, 3), "probes": round(probe_s, 3),
+                        "total": round(time.perf_counter() - t0, 3)}}
+    if curves:
+        per_t = []
+        for t in range(n - 1):
+            err = torch.tensor([float("nan") if e is None else round(e, 4) for c in curve for e in c[t]],
+                               dtype=torch.float64)
+            ok = err[~torch.isnan(err)]
+            values, counts_t = torch.unique(ok, return_counts=True)
+            per_t.append({"values": values.tolist(), "counts": counts_t.tolist(), "none": int(len(err) - len(ok))})
+        final = torch.tensor([float("nan") if e is None else e for e in errors], dtype=torch.float64)
+        ok = final[~torch.isnan(final)]
+        values, counts_t = torch.unique(ok, return_counts=True)
+        per_t.append({"values": values.tolist(), "counts": counts_t.tolist(), "none": int(len(final) - len(ok))})
+        out["curves"] = {"probe_rel_error": per_t}
     return out
 
 

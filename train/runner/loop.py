@@ -63,6 +63,9 @@ def prepare(args, objects, n_orders: int, physics=None):
     # does building the experiment (its maps' training took 6.9 s on 2 threads of a busy machine, 0.3 s on 1); a
     # population of many orders sets its own (train/learning/population.py)
     torch.set_num_threads(1)
+    if args.run_config.agent.explore == "active" and args.physics == "per-episode":
+        raise UsageError("--explore active looks at every object on the stand before choosing, from its measurement "
+                         "on cached physics: it does not run with --physics per-episode")
     if n_orders > FULL_RUNS and args.physics == "per-episode":
         raise UsageError(f"--physics per-episode with {n_orders} orders would simulate "
                          f"{n_orders * len(objects.train)} drops; more than {FULL_RUNS} orders run as a population "

@@ -76,6 +76,8 @@ def gather_config(a) -> None:
         put("model", a.model, "--model")
     if a.ablate is not None:
         put("ablate", list(dict.fromkeys(a.ablate)), "--ablate")
+    if getattr(a, "explore", None) is not None:
+        put("explore", a.explore, "--explore")
     if a.seed is not None:
         put("seed", a.seed, "--seed")
     a.overrides, a.origins = overrides, origins

@@ -157,8 +157,12 @@ def run_cell(cell: dict, objects: dict | None = None, world: tuple | None = None
         if Q:   # the senses' floor: Archimedes applied to the probes as the robot measures them (water at 1 g/cm^3)
             sensed = torch.minimum(pmeas["mass_g"], pmeas["fill"] * pmeas["extent_cm"].prod(-1))
             floors = torch.nan_to_num((sensed - truth).abs() / truth, nan=1.0).double().tolist()
+        active = agent.config.explore == "active"
+        if active:   # the robot chooses its next object: it looks at (and lifts) every one on the stand
+            from aesop_torch.exploration import choose_in_order
+            seen = agent.activities(meas)
         for t in range(n):
-            obj = orders[:, t]
+            obj = choose_in_order(agent, *seen, orders, t) if active else orders[:, t]
             res = agent.step({k: v[obj] for k, v in meas.items()}, observed[obj].float(), ep["goal_before"][obj],
                              ep["goal_after"][obj], sank=ep["sank"][obj])
             predicted.append(res.expected.double())
