@@ -20,7 +20,7 @@ OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows o
 AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 
 MODELS = ("paper", "contextual", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "replay", "signed"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
@@ -181,6 +181,11 @@ class AgentConfig:
     # strongest counts 3 % of it, and the ones past the first few barely count; recall is most of an episode's time
     # (a whole recall settles the network once per episode it brings back)
     fate_recalls: int = 8
+    # contextual, replay (replay.py): signed consistency grows a property whose change had the outcome's sign in
+    # every clear contradicted pair of a context, once there are at least this many. Two pairs agree by chance one
+    # time in two (a property unrelated to the outcome), three one in four, and each more pair halves it again; 3 is
+    # the fewest that a set of 24 (a handful of floaters) still reaches
+    signed_pairs: int = 3
     seed: int = 0
 
     @classmethod
@@ -232,6 +237,8 @@ class AgentConfig:
         if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0 or not self.fate_recalls >= 1:
             raise ValueError(f"AgentConfig.compare_floor must be in 0..1, fit_sharpness > 0 and fate_recalls >= 1, "
                              f"got {self.compare_floor}, {self.fit_sharpness}, {self.fate_recalls}")
+        if not (isinstance(self.signed_pairs, int) and self.signed_pairs >= 1):
+            raise ValueError(f"AgentConfig.signed_pairs must be an integer >= 1, got {self.signed_pairs!r}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
