@@ -1,0 +1,169 @@
+"""The contextual model's consolidation by replay (aesop_torch/replay.py): the knowledge a function of the episodes
+lived, not of their order; no Elimination in the fate context; signed consistency. Each claim is also run with the
+part it tests ablated, and must then fail (`pytest.raises(AssertionError)`)."""
+
+import math
+
+import pytest
+import torch
+
+from aesop_torch import Agent, AgentConfig
+from aesop_torch.contextual_rules import FATE, FLOATING, SINKING
+from sim.make_objects import generate
+from sim.objects import parse_objects
+from sim.sensor_model import SensorModel
+from train.experiment import closed_form_outcomes, stack_measurements
+
+RED, BLUE, GREEN = (0.85, 0.1, 0.1), (0.1, 0.2, 0.85), (0.1, 0.8, 0.2)
+COLOR, FILL, ELONGATION, SIZE, WEIGHT = range(5)
+ABLATIONS = ((), ("replay",), ("signed",))
+
+
+@pytest.fixture(scope="module")
+def developed():
+    """One developed agent per ablation (the maps' training is the slow part); each test takes a fresh copy."""
+    return {ab: Agent(AgentConfig.contextual(seed=0, ablate=ab)) for ab in ABLATIONS}
+
+
+def fresh(developed, ablate=(), batch=1):
+    return developed[tuple(ablate)].select([0] * batch)       # a copy of the learned state (still empty)
+
+
+def cube(side_cm, mass_g, rgb=RED):
+    return {"rgb": torch.tensor([rgb]), "extent_cm": torch.tensor([[side_cm] * 3]), "fill": torch.tensor([1.0]),
+            "mass_g": torch.tensor([float(mass_g)])}
+
+
+def drop(agent, m, cm3, sank):
+    return agent.step(m, torch.tensor([cm3]), torch.tensor([False]), torch.tensor([False]), sank=torch.tensor([sank]))
+
+
+def _life():
+    """A generated set of 14 objects (seed 1001) with the simulated robot's noise, in closed form."""
+    objs = parse_objects(generate(1001, 14, 1, pairs=True))
+    outcomes, _ = closed_form_outcomes(objs, sensor=SensorModel(), seed=1001)
+    names = [o.name for o in objs.train]
+    return (stack_measurements([outcomes[n]["measurement"] for n in names]),
+            torch.tensor([outcomes[n]["observed_cm3"] for n in names]),
+            torch.tensor([outcomes[n]["sank"] for n in names]))
+
+
+def _same_knowledge_in_every_order(developed, ablate):
+    """One life's episodes in four orders (one agent each, side by side): the strengths and the firing counts per
+    context the same bit for bit after the last one."""
+    meas, observed, sank = _life()
+    g = torch.Generator().manual_seed(7)
+    orders = torch.stack([torch.arange(14)] + [torch.randperm(14, generator=g) for _ in range(3)])
+    agent = fresh(developed, ablate, batch=len(orders))
+    no = torch.zeros(len(orders), dtype=torch.bool)
+    for t in range(14):
+        o = orders[:, t]
+        agent.step({k: v[o] for k, v in meas.items()}, observed[o], no, no, sank=sank[o])
+    s, fired = agent.rules.strength, agent.rules.fired
+    assert (agent.rules.strength != 1.0).any()                                 # it learned something
+    for b in range(1, len(orders)):
+        assert torch.equal(s[b], s[0]), (b, s[b], s[0])
+        assert torch.equal(fired[b], fired[0]), b
+
+
+def test_replay_makes_the_knowledge_the_same_in_every_order(developed):
+    _same_knowledge_in_every_order(developed, ())
+    with pytest.raises(AssertionError):          # the sequential rules: which comparisons are clean depends on order
+        _same_knowledge_in_every_order(developed, ("replay",))
+
+
+def test_an_episode_not_encoded_still_counts_in_replay(developed):
+    """The paper's episodes: the blue twin of the red heavy cylinder (or the red one of the blue) comes second and is
+    not encoded (nothing new), so the memory stores a different pair in each order; replay compares every episode
+    lived, and both orders end with the same knowledge: weight decides the fate (the 14 g one floats)."""
+    cyl = lambda rgb, m: {"rgb": torch.tensor([rgb]), "extent_cm": torch.tensor([[11.5, 6.36, 6.36]]),  # noqa: E731
+                          "fill": torch.tensor([math.pi / 4]), "mass_g": torch.tensor([float(m)])}
+    ends = []
+    for first, second in ((RED, BLUE), (BLUE, RED)):
+        agent = fresh(developed)
+        drop(agent, cyl(first, 420), 365.0, True)
+        assert not drop(agent, cyl(second, 420), 365.0, True).encoded[0]
+        drop(agent, cyl(RED, 14), 14.0, False)
+        assert agent.memory.count[0] == 2 and agent.rules.lived_count[0] == 3
+        ends.append((agent.rules.strength.clone(), agent.rules.fired.clone()))
+    assert torch.equal(ends[0][0], ends[1][0]) and torch.equal(ends[0][1], ends[1][1])
+    assert ends[0][0][0, FATE, WEIGHT] > 1.0 and ends[0][0][0, SINKING, COLOR] <= 0.1
+
+
+def _no_elimination_in_the_fate_context(developed, ablate):
+    """Two sinking cubes of 300 g, 5 and 6 cm (125 and 216 cm^3): size alone changed, the fate held (both sink), the
+    reward moved. Size grows among sinkers; the fate's holding says nothing about what decides the fate, so size is
+    not eliminated there."""
+    agent = fresh(developed, ablate)
+    drop(agent, cube(5.0, 300), 125.0, True)
+    drop(agent, cube(6.0, 300), 216.0, True)
+    s = agent.rules.strength[0]
+    assert s[SINKING, SIZE] > 1.0, s
+    assert s[FATE, SIZE] > agent.config.retro_floor, s
+
+
+def test_a_fate_that_held_eliminates_nothing_for_the_fate(developed):
+    _no_elimination_in_the_fate_context(developed, ())
+    with pytest.raises(AssertionError):          # the sequential rules: E on size for the fate
+        _no_elimination_in_the_fate_context(developed, ("replay",))
+
+
+def test_a_property_eliminated_for_floaters_and_sinkers_is_irrelevant_to_the_fate(developed):
+    """Colour twins among floaters (8 cm cubes of 50 g) eliminate colour there; the fate still shows it. Colour
+    twins among sinkers (5 cm cubes of 300 g) eliminate it there too, and then it is irrelevant to the fate."""
+    agent = fresh(developed)
+    drop(agent, cube(8.0, 50, RED), 50.0, False)
+    drop(agent, cube(8.0, 50, BLUE), 50.0, False)
+    s = agent.rules.strength[0]
+    assert s[FLOATING, COLOR] <= 0.1 and s[FATE, COLOR] > 0.1, s
+    drop(agent, cube(5.0, 300, RED), 125.0, True)
+    drop(agent, cube(5.0, 300, BLUE), 125.0, True)
+    s = agent.rules.strength[0]
+    assert s[SINKING, COLOR] <= 0.1 and s[FATE, COLOR] <= 0.1, s
+    assert "color" in agent.rules.by_context(0)["fate"]["irrelevant"]
+
+
+def _signed_weight(developed, ablate):
+    """Four red floating cubes, each pair changing size and weight at once (never a clean pair): 8 cm 50 g, 10 cm
+    80 g, 7 cm 120 g, 9 cm 200 g (they displace their weight). In all 6 pairs the heavier displaced more: weight
+    grows among floaters; size went up with the reward in some pairs and down in others, so it does not."""
+    agent = fresh(developed, ablate)
+    for side, mass in ((8.0, 50), (10.0, 80), (7.0, 120), (9.0, 200)):
+        drop(agent, cube(side, mass), float(mass), False)
+    s = agent.rules.strength[0]
+    assert s[FLOATING, WEIGHT] > 1.0, s
+    assert s[FLOATING, SIZE] <= 1.0, s
+
+
+def test_signed_consistency_grows_weight_among_floaters_that_never_share_a_mass(developed):
+    _signed_weight(developed, ())
+    with pytest.raises(AssertionError):
+        _signed_weight(developed, ("signed",))
+
+
+def test_signed_consistency_needs_signed_pairs_pairs(developed):
+    """Three floaters (3 pairs) reach the default 3; with signed_pairs 4 the same three grow nothing."""
+    for n, grows in ((3, True), (4, False)):
+        agent = fresh(developed)
+        agent.config = AgentConfig.contextual(seed=0, signed_pairs=n)
+        for side, mass in ((8.0, 50), (10.0, 80), (7.0, 120)):
+            drop(agent, cube(side, mass), float(mass), False)
+        assert (agent.rules.strength[0, FLOATING, WEIGHT] > 1.0) == grows, (n, agent.rules.strength)
+
+
+def test_replay_resumes_from_the_lived_store_alone(developed):
+    """The pair cache is derived from the lived store (not saved): a copy (select) rebuilds it and goes on to the
+    same knowledge as the original."""
+    meas, observed, sank = _life()
+    a = fresh(developed)
+    no = torch.zeros(1, dtype=torch.bool)
+    for t in range(8):
+        a.step({k: v[t:t + 1] for k, v in meas.items()}, observed[t:t + 1], no, no, sank=sank[t:t + 1])
+    b = a.select([0])
+    for agent in (a, b):
+        for t in range(8, 11):
+            agent.step({k: v[t:t + 1] for k, v in meas.items()}, observed[t:t + 1], no, no, sank=sank[t:t + 1])
+    assert torch.equal(a.rules.strength, b.rules.strength) and torch.equal(a.rules.fired, b.rules.fired)
+    n = int(a.rules.lived_count[0])
+    off = ~torch.eye(n, dtype=torch.bool)                                     # a pair is two different episodes
+    assert torch.equal(a.rules.pair_changed[0, :n, :n][off], b.rules.pair_changed[0, :n, :n][off])
