@@ -20,7 +20,8 @@ OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows o
 AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 
 MODELS = ("paper", "contextual", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "replay", "signed"),
+ABLATIONS = {"paper": ("rules", "gating"),
+             "contextual": ("rules", "gating", "context", "fit", "replay", "signed"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")

@@ -92,7 +92,7 @@ def parse_args(argv):
     ap.add_argument("--ablate", action="append", default=None, metavar="PART",
                     help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
                          "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
-                         "physics priors)")
+                         "physics priors), context, fit, replay, signed (contextual only: docs/model.md)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")

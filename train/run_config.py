@@ -25,7 +25,8 @@ DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+ABLATIONS = {"paper": ("rules", "gating"),
+             "contextual": ("rules", "gating", "context", "fit", "replay", "signed"),
              "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
