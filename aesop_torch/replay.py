@@ -43,8 +43,6 @@ from .contextual_rules import CONTEXTS, FATE, FLOATING, SINKING
 from .fitted_readout import log_mass, log_size
 from .rules import ELIMINATION, GROWTH, UNCERTAINTY, contradiction, outcome_unclear
 
-BOTH_SIGNS = False
-
 
 def signed_gaps(values: dict, recalled: dict, config) -> torch.Tensor:
     """(B, K, P) the sign (-1, 0, 1) of each property's change from recalled[p] (B, K, dim) to values[p] (B, dim):
@@ -182,7 +180,7 @@ def derive(rules, config) -> None:
             clear = changed & ~elim[:, :, None, None, :] & moved[..., None] & (rules.pair_sign[:, None] != 0)
             agree = clear & ((rules.pair_sign[:, None] * osign[..., None]) > 0)
             n_clear, n_agree = clear.flatten(2, 3).sum(2), agree.flatten(2, 3).sum(2)
-            signed = (n_clear >= config.signed_pairs) & ((n_agree == n_clear) | (BOTH_SIGNS & (n_agree == 0)))
+            signed = (n_clear >= config.signed_pairs) & (n_agree == n_clear)
             n_grow = n_grow + signed * n_agree
         new = grown | (n_grow > 0)
         if torch.equal(new, grown):

@@ -167,3 +167,17 @@ def test_replay_resumes_from_the_lived_store_alone(developed):
     n = int(a.rules.lived_count[0])
     off = ~torch.eye(n, dtype=torch.bool)                                     # a pair is two different episodes
     assert torch.equal(a.rules.pair_changed[0, :n, :n][off], b.rules.pair_changed[0, :n, :n][off])
+
+
+def test_a_contextual_checkpoint_from_before_replay_is_refused_in_one_line():
+    """A checkpoint's agent state without the lived store (written before replay) is refused naming what is missing."""
+    from train.checkpoint import _agent_problem
+    config = AgentConfig.contextual(seed=0)
+    config.memory.max_episodes = config.hub.max_assemblies = 4
+    state = Agent(config, batch=2, develop=False).state_dict()
+    e = {"config": config.to_dict(), "seed": 0, "train_names": list("abcd"), "orders": [[0, 1, 2, 3]] * 2,
+         "agent": state}
+    assert _agent_problem(e, 10 ** 9) is None
+    old = {k: v for k, v in state.items() if not k.startswith("rules.lived_")}
+    problem = _agent_problem({**e, "agent": old}, 10 ** 9)
+    assert problem.startswith("agent state: missing ['rules.lived_count'") and "\n" not in problem, problem
