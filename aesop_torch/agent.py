@@ -292,7 +292,10 @@ class Agent(nn.Module):
         else:
             strength = self.hub.strength.clone()
             ctx = torch.as_tensor(context).expand(self.batch)
-            strength[:, self._judged()] = self.rules.context_strength()[torch.arange(self.batch), ctx]
+            known = self.rules.context_strength()[torch.arange(self.batch), ctx]
+            if self.config.cue_ceiling is not None:
+                known = known.clamp(max=self.config.cue_ceiling)
+            strength[:, self._judged()] = known
         cue = self.hub.bottom_up(acts, self.cue_present(present), strength=strength)
         if not self.config.names_in_cue:
             # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
