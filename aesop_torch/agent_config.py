@@ -216,7 +216,7 @@ class AgentConfig:
         free to grow an eliminated pathway back; recall in two steps (the fate, then the reward within it) and a
         local fit over the recalled episodes of the expected fate."""
         kw = {"model": "contextual", "learning": "contextual", "readout": "local_fit", "compare_with": None,
-              "delta_p_band": SPLIT_DELTA_BAND, "weight_unchanged_sigmas": -2.0, **kw}
+              "delta_p_band": SPLIT_DELTA_BAND, "weight_unchanged_sigmas": -2.0, "cue_ceiling": 1.0, **kw}
         kw.setdefault("encoder", EncoderConfig(properties=SPLIT_PROPERTIES))
         return cls(**kw)
 

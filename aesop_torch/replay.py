@@ -112,34 +112,38 @@ def add_episode(rules, values: dict, outcome: torch.Tensor, fate: torch.Tensor, 
 def derive(rules, config) -> None:
     """Re-derive the rules' strengths and firing counts from every cached pair (see the module's doc)."""
     rules.ensure_cache(config)
-    B, M = rules.lived_outcome.shape
+    B = rules.lived_outcome.shape[0]
     C, P = len(CONTEXTS), len(rules.properties)
     rc = config.rules
     n = rules.lived_count
-    idx = torch.arange(M)
-    valid = idx[None, :] < n[:, None]
-    pairs = valid[:, :, None] & valid[:, None, :] & (idx[:, None] < idx[None, :])[None]          # (B, M, M), i < j
-    f = rules.lived_fate
-    seen = pairs & (f[:, :, None] >= 0) & (f[:, None, :] >= 0)
-    in_ctx = torch.stack([seen & (f[:, :, None] == 0) & (f[:, None, :] == 0),
-                          seen & (f[:, :, None] == 1) & (f[:, None, :] == 1), seen], 1)       # (B, C, M, M)
-    fate_dc = f[:, :, None] != f[:, None, :]
-    fate_sign = (f[:, :, None] - f[:, None, :]).to(torch.int8)                                  # [i, j]: i's over j's
-    dc = torch.stack([rules.pair_dc, rules.pair_dc, fate_dc], 1)                            # (B, C, M, M)
-    uc = torch.stack([rules.pair_uc, rules.pair_uc, torch.zeros_like(fate_dc)], 1)
-    osign = torch.stack([rules.pair_osign, rules.pair_osign, fate_sign], 1)
+    m = int(n.max()) if B else 0
+    # each pair once (i < j), over the episodes lived so far: dims (B, N) per pair, (B, C, N) per context
+    i, j = torch.triu_indices(m, m, 1)
+    pairs = (j[None] < n[:, None])                                                           # (B, N)
+    f = rules.lived_fate[:, :m]
+    fi, fj = f[:, i], f[:, j]
+    seen = pairs & (fi >= 0) & (fj >= 0)
+    pick = lambda t: t[:, :m, :m][:, i, j]                                                   # noqa: E731
+    r_dc, r_uc, r_os = pick(rules.pair_dc), pick(rules.pair_uc), pick(rules.pair_osign)
+    changed, unclear, sign = pick(rules.pair_changed), pick(rules.pair_unclear), pick(rules.pair_sign)  # (B, N, P)
     contexts = "context" not in config.ablate
-    if not contexts:   # the "context" ablation: every pair judged on its reward, alike in all three
-        in_ctx, dc = pairs[:, None].expand(-1, C, -1, -1), rules.pair_dc[:, None].expand(-1, C, -1, -1)
-        uc, osign = rules.pair_uc[:, None].expand(-1, C, -1, -1), rules.pair_osign[:, None].expand(-1, C, -1, -1)
-    changed, unclear = rules.pair_changed[:, None], rules.pair_unclear[:, None]               # (B, 1, M, M, P)
+    if contexts:
+        in_ctx = torch.stack([seen & (fi == 0) & (fj == 0), seen & (fi == 1) & (fj == 1), seen], 1)   # (B, C, N)
+        dc = torch.stack([r_dc, r_dc, fi != fj], 1)
+        uc = torch.stack([r_uc, r_uc, torch.zeros_like(r_uc)], 1)
+        osign = torch.stack([r_os, r_os, (fi - fj).to(torch.int8)], 1)                       # i's over j's
+    else:   # the "context" ablation: every pair judged on its reward, alike in all three
+        in_ctx, dc = pairs[:, None].expand(-1, C, -1), r_dc[:, None].expand(-1, C, -1)
+        uc, osign = r_uc[:, None].expand(-1, C, -1), r_os[:, None].expand(-1, C, -1)
+    changed, unclear = changed[:, None], unclear[:, None]                                    # (B, 1, N, P)
     clear_full = changed & ~unclear.any(-1, keepdim=True)
-    ablate = config.ablate
-    signed_on = "signed" not in ablate
+    signed_on = "signed" not in config.ablate
+    ordered = (sign != 0)[:, None]
+    agrees = (sign[:, None] * osign[..., None]) > 0                                          # (B, C, N, P)
 
     def judge(elim):
         """The pairs' judgments with `elim` (B, C, P) eliminated: (use, dp, clean) per context."""
-        live = ~elim[:, :, None, None, :]
+        live = ~elim[:, :, None, :]
         un = unclear & live
         use = in_ctx & ~cannot_tell(un, dc, uc)
         if config.strict_comparisons:
@@ -153,8 +157,7 @@ def derive(rules, config) -> None:
         elim = torch.zeros(B, C, P, dtype=torch.bool)
         for _ in range(C * P + 1):
             use, dp, clean = judge(elim)
-            held = use & ~dc & clean
-            cand = (dp & held[..., None]).flatten(2, 3).any(2)                             # (B, C, P)
+            cand = (dp & (use & ~dc & clean)[..., None]).any(2)                              # (B, C, P)
             new = (elim | cand) & ~grown
             if contexts:
                 new[:, FATE] = elim[:, FLOATING] & elim[:, SINKING] & ~grown[:, FATE]
@@ -168,29 +171,25 @@ def derive(rules, config) -> None:
         elim = eliminations(grown)
         use, dp, clean = judge(elim)
         moved = use & dc
-        g_pairs = dp & (moved & clean)[..., None]                                          # (B, C, M, M, P)
-        n_grow = g_pairs.flatten(2, 3).sum(2)
+        n_grow = (dp & (moved & clean)[..., None]).sum(2)
         # an outcome nothing live explains: the one eliminated property that changed clearly, unless eliminated
         # everywhere
-        nowhere = elim.all(1)[:, None, None, None, :]
-        back = clear_full & elim[:, :, None, None, :] & ~nowhere & (moved & ~dp.any(-1))[..., None]
+        nowhere = elim.all(1)[:, None, None, :]
+        back = clear_full & elim[:, :, None, :] & ~nowhere & (moved & ~dp.any(-1))[..., None]
         back &= back.sum(-1, keepdim=True) == 1
-        n_grow = n_grow + back.flatten(2, 3).sum(2)
+        n_grow = n_grow + back.sum(2)
         if signed_on:
-            clear = changed & ~elim[:, :, None, None, :] & moved[..., None] & (rules.pair_sign[:, None] != 0)
-            agree = clear & ((rules.pair_sign[:, None] * osign[..., None]) > 0)
-            n_clear, n_agree = clear.flatten(2, 3).sum(2), agree.flatten(2, 3).sum(2)
-            signed = (n_clear >= config.signed_pairs) & (n_agree == n_clear)
-            n_grow = n_grow + signed * n_agree
+            clear = changed & ~elim[:, :, None, :] & moved[..., None] & ordered
+            n_clear, n_agree = clear.sum(2), (clear & agrees).sum(2)
+            n_grow = n_grow + ((n_clear >= config.signed_pairs) & (n_agree == n_clear)) * n_agree
         new = grown | (n_grow > 0)
         if torch.equal(new, grown):
             break
         grown = new
     undecided = ~elim & ~grown
-    n_unc = ((~dp & ~elim[:, :, None, None, :] & moved[..., None]).flatten(2, 3).sum(2)) * undecided
+    n_unc = (~dp & ~elim[:, :, None, :] & moved[..., None]).sum(2) * undecided
     # the held pairs where an eliminated property alone changed (it shows no change now: count it at full strength)
-    alone = changed & (use & ~dc & ~dp.any(-1))[..., None]
-    n_elim = alone.flatten(2, 3).sum(2) * elim
+    n_elim = (changed & (use & ~dc & ~dp.any(-1))[..., None]).sum(2) * elim
     if contexts:
         n_elim[:, FATE] = elim[:, FATE].long()                            # the fate's: derived, counted once
     s = torch.ones(B, C, P)
