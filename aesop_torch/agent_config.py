@@ -99,8 +99,10 @@ class AgentConfig:
     weight_unchanged_sigmas: float = 1.0
     # leave out every comparison with a property in its dead zone, held or not (cannot_tell leaves out only the
     # contradicted ones): a fill change beside a size change too small to call one can cancel, larger but hollower.
-    # Off in every model: on, the contextual model learned nothing in 24 objects (every random pair has some property
-    # in its dead zone) and its error after 24 rose from 12-33 % to 24-29 % (tuning seeds 1000-1002)
+    # Off in every model. The sequential contextual rules learned nothing in 24 objects with it on (every random pair
+    # has some property in its dead zone; error after 24 from 12-33 % to 24-29 %, tuning seeds 1000-1002). With
+    # replay, lives of 64 (tuning seeds 1000-1003): 9.7 % on against 4.2 % off after 64 objects, and size lost among
+    # sinkers; replay undoes the cancellation instead (Growth outranks Elimination). docs/model.md
     strict_comparisons: bool = False
     # a readout fit that reads the mass weighs an episode by how well its mass was felt, m^2 / (m^2 + (noise /
     # this)^2): the wrist's 1 g is 12 % of an 8 g floater, far more than the ~2 % the camera's volume is known to
