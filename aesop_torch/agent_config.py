@@ -193,8 +193,8 @@ class AgentConfig:
     # reaches recall by what it rules out (an eliminated pathway at 0.05, a doubtful one decayed by Uncertainty),
     # not by amplifying a dominant one to 3: in the fate's recall weight alone is dominant long before fill and
     # size are (a fate flip with size alone changed is rare), and a cue led by weight recalls the fates of
-    # objects of a like mass, whatever their volume. Sets of 24 (tuning seeds 1000-1005 x 4 orders), median error:
-    # as they are 10.1 %, gating off 9.4 %, capped at 1 9.0 %
+    # objects of a like mass, whatever their volume. Median error, lives of 64 (tuning seeds 1000-1003): as they are
+    # 5.2 %, capped at 1 4.2 %, gating off 8.0 %; sets of 24 (1000-1005 x 4 orders): capped 10.2 %, gating off 9.3 %
     cue_ceiling: float | None = None
     seed: int = 0
 
