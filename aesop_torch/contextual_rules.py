@@ -25,6 +25,10 @@ pathways still show). Two choices the paper leaves open, made so the rules keep 
   eliminated it, changes in almost every comparison and explains none), Growth fires on it (from the eliminated
   strength, so it is dominant at once).
 
+These are the sequential rules (`--ablate replay`). By default each episode's comparisons fire them as it happens,
+and then, at rest, replay.py re-derives the strengths and counts from every pair of episodes lived (kept here, in
+the `lived_*` buffers), so the knowledge does not depend on the order the objects came in.
+
 Knowledge per context is read from the strengths: irrelevant at or below the retro-activation floor, dominant above
 1, likely irrelevant once Uncertainty fired there, else unknown. Over contexts (`state`): dominant in some context,
 else irrelevant in some, else likely irrelevant, else unknown. With contexts off (the "context" ablation) every
