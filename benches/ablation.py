@@ -341,7 +341,7 @@ def main():
             parts = [torch.cat([r["state"][:, r["properties"].index(prop)] for r in res[k, c]])
                      for k in ("8", "24", "life")]
             return "/".join(f"{float((x == code).float().mean()):.2f}" for x in parts)
-        print(f"{c:<17}{same('8', c):>10.3f}{same('24', c):>10.3f}  {share('color', IRRELEVANT)}  "
+        print(f"{c:<17}{_fmt(same('8', c), 3):>10}{_fmt(same('24', c), 3):>10}  {share('color', IRRELEVANT)}  "
               f"{share('color', DOMINANT)}  {share('weight', IRRELEVANT)}  {share('size', IRRELEVANT)}")
     print(f"{time.perf_counter() - t0:.0f} s")
 
@@ -398,9 +398,14 @@ def main():
         line["extended_err_8"] = err("8", "extended", 8)
         if "extended -rules" in conditions:
             line["extended_rules_off_ratio_24"] = ratio("extended -rules", "extended", "24", 24)
-    print(" ".join(f"{k}={v:.4f}" for k, v in line.items()))
+    print(" ".join(f"{k}={_fmt(v)}" for k, v in line.items()))
     if ctx:   # the contextual model's figures (issue 45), last
-        print(" ".join(f"{k}={v:.4f}" if isinstance(v, float) else f"{k}={v}" for k, v in ctx.items()))
+        print(" ".join(f"{k}={_fmt(v)}" for k, v in ctx.items()))
+
+
+def _fmt(v, digits: int = 4) -> str:
+    """A figure to print: n/a where there is none (order agreement over one order is None)."""
+    return "n/a" if v is None else f"{v:.{digits}f}" if isinstance(v, (int, float)) else str(v)
 
 
 if __name__ == "__main__":
