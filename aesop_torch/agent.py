@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 import torch
 from torch import nn
 
-from . import comparisons, fate_boundary, fitted_readout
+from . import comparisons, fate_boundary, fitted_readout, replay
 from .agent_config import (ABLATIONS, AGENT_ROW_K, MODELS, OBJECT_ROWS, ROW_BODY_END, ROW_BODY_START, ROW_DROP,
                            ROW_FATE_UNSEEN, ROW_GRASP, ROW_OBJECT, ROW_REACH, ROW_REWARD, ROW_REWARD_FINE, AgentConfig)
 from .comparisons import cannot_tell
@@ -165,8 +165,12 @@ class Agent(nn.Module):
         c = self.config
         if c.learning == "evidence":
             return CausalRules(c.rules, batch=batch, properties=self.properties)
-        kind = ContextualRules if c.learning == "contextual" else IncrementalRules
-        return kind(c.rules, batch=batch, properties=self.properties, retro_floor=c.retro_floor)
+        if c.learning == "contextual":
+            # replay.py's lived store holds as many episodes as the memory (none when replay is ablated)
+            capacity = 0 if "replay" in c.ablate else c.memory.max_episodes
+            return ContextualRules(c.rules, batch=batch, properties=self.properties, retro_floor=c.retro_floor,
+                                   capacity=capacity, dims={p: self.maps[p].config.dim for p in self.properties})
+        return IncrementalRules(c.rules, batch=batch, properties=self.properties, retro_floor=c.retro_floor)
 
     def _judged(self) -> list[int]:
         """The judged properties' maps, in `properties` order: their indices into the maps (and the hub's
@@ -268,6 +272,10 @@ class Agent(nn.Module):
             expected = recall_average(rewards, strength, self.config.recall_sharpness)
         return Anticipation(expected, rewards, recall, acts, present, values, recalled, fates, by_fate, p_out)
 
+    def _replays(self) -> bool:
+        """Whether the knowledge is consolidated by replay (contextual learning, neither rules nor replay ablated)."""
+        return self.config.learning == "contextual" and not {"rules", "replay"} & set(self.config.ablate)
+
     def _fates_seen(self) -> bool:
         """Whether the rules keep knowledge per fate (contextual learning, contexts not ablated): then recall goes
         in two steps, the fate first."""
@@ -285,7 +293,10 @@ class Agent(nn.Module):
         else:
             strength = self.hub.strength.clone()
             ctx = torch.as_tensor(context).expand(self.batch)
-            strength[:, self._judged()] = self.rules.context_strength()[torch.arange(self.batch), ctx]
+            known = self.rules.context_strength()[torch.arange(self.batch), ctx]
+            if self.config.cue_ceiling is not None:
+                known = known.clamp(max=self.config.cue_ceiling)
+            strength[:, self._judged()] = known
         cue = self.hub.bottom_up(acts, self.cue_present(present), strength=strength)
         if not self.config.names_in_cue:
             # an object known only by its name (no episode of it stored) takes no part in the recall of one in view
@@ -491,6 +502,11 @@ class Agent(nn.Module):
         if encoded.any():
             self._encode(a.acts, a.present, observed, goal_before, goal_after, fate, encoded)
         self._name(a.acts, a.present, learn & (self.hub.n_assemblies == count))   # not if _encode just stored it
+        if self._replays():
+            # at rest: the knowledge re-derived from every pair of episodes lived (replay.py), this one's pairs new
+            replay.add_episode(self.rules, a.values, self.reward.stored(observed), fate, learn, self.config)
+            replay.derive(self.rules, self.config)
+            self._set_judged_strength(self.rules.strength_from_knowledge())
         return EpisodeStep(a.expected, recall.any & learn, delta_p, delta_c, c.fired, encoded)
 
     @torch.no_grad()

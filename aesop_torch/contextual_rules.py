@@ -25,6 +25,10 @@ pathways still show). Two choices the paper leaves open, made so the rules keep 
   eliminated it, changes in almost every comparison and explains none), Growth fires on it (from the eliminated
   strength, so it is dominant at once).
 
+These are the sequential rules (`--ablate replay`). By default each episode's comparisons fire them as it happens,
+and then, at rest, replay.py re-derives the strengths and counts from every pair of episodes lived (kept here, in
+the `lived_*` buffers), so the knowledge does not depend on the order the objects came in.
+
 Knowledge per context is read from the strengths: irrelevant at or below the retro-activation floor, dominant above
 1, likely irrelevant once Uncertainty fired there, else unknown. Over contexts (`state`): dominant in some context,
 else irrelevant in some, else likely irrelevant, else unknown. With contexts off (the "context" ablation) every
@@ -53,15 +57,57 @@ class ContextualRules(nn.Module):
     contexts = CONTEXTS
 
     def __init__(self, config: RulesConfig | None = None, batch: int = 1, properties=PROPERTIES,
-                 retro_floor: float = 0.1):
+                 retro_floor: float = 0.1, capacity: int = 0, dims: dict | None = None):
+        """capacity, dims: the lived store replay.py consolidates from (episodes, and {property: decoded dims})."""
         super().__init__()
         self.config = config or RulesConfig()
         self.properties = tuple(properties)
         self.retro_floor = retro_floor
-        P, C = len(self.properties), len(CONTEXTS)
+        self.dims = dict(dims or {p: 1 for p in self.properties})
+        P, C, M, D = len(self.properties), len(CONTEXTS), capacity, sum(self.dims.values())
         self.register_buffer("strength", torch.ones(batch, C, P))
         self.register_buffer("fired", torch.zeros(batch, C, P, 4, dtype=torch.long))
         self.register_buffer("state", torch.zeros(batch, P, dtype=torch.long))
+        # every episode lived (replay.py): its decoded values, its outcome as the memory holds it, its fate
+        self.register_buffer("lived_values", torch.zeros(batch, M, D))
+        self.register_buffer("lived_outcome", torch.zeros(batch, M))
+        self.register_buffer("lived_fate", torch.full((batch, M), -1, dtype=torch.long))
+        self.register_buffer("lived_count", torch.zeros(batch, dtype=torch.long))
+        self._empty_cache(batch, M, P)
+
+    # -- the pairs of lived episodes, compared once (replay.py); derived from the lived store, so not saved ---------
+    def _empty_cache(self, B: int, M: int, P: int) -> None:
+        for name, shape, dtype in (("pair_changed", (B, M, M, P), torch.bool), ("pair_unclear", (B, M, M, P), torch.bool),
+                                   ("pair_sign", (B, M, M, P), torch.int8), ("pair_dc", (B, M, M), torch.bool),
+                                   ("pair_uc", (B, M, M), torch.bool), ("pair_osign", (B, M, M), torch.int8)):
+            self.register_buffer(name, torch.zeros(shape, dtype=dtype), persistent=False)
+        self.register_buffer("cached_count", torch.zeros(B, dtype=torch.long), persistent=False)
+
+    def ensure_cache(self, config) -> None:
+        """Rebuild the pair cache from the lived store when it does not hold its pairs (after a load or a select)."""
+        B, M = self.lived_outcome.shape
+        if self.pair_dc.shape[:2] == (B, M) and torch.equal(self.cached_count, self.lived_count):
+            return
+        from .replay import add_episode, unflatten
+        values, outcome, fate, count = (self.lived_values.clone(), self.lived_outcome.clone(), self.lived_fate.clone(),
+                                        self.lived_count.clone())
+        self._empty_cache(B, M, len(self.properties))
+        self.lived_count.zero_()
+        self.lived_fate.fill_(-1)
+        for k in range(int(count.max()) if B else 0):
+            add_episode(self, unflatten(values[:, k], self.dims), outcome[:, k], fate[:, k], k < count, config)
+
+    def drop_oldest(self, mask: torch.Tensor) -> None:
+        """Let the oldest lived episode of the agents in mask go (a full store), with its pairs."""
+        for name in ("lived_values", "lived_outcome", "lived_fate"):
+            buf = getattr(self, name)
+            buf[mask] = torch.cat([buf[mask][:, 1:], buf[mask][:, :1]], 1)
+        self.lived_fate[mask, -1] = -1
+        for name in ("pair_changed", "pair_unclear", "pair_sign", "pair_dc", "pair_uc", "pair_osign"):
+            buf = getattr(self, name)
+            buf[mask] = buf[mask].roll((-1, -1), (1, 2))
+        self.lived_count[mask] -= 1
+        self.cached_count[mask] -= 1
 
     # -- knowledge read from the strengths --------------------------------------------------------------------
     @property

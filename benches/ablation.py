@@ -9,8 +9,9 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 
 - paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
 - contextual and its ablations (-rules, -gating, -context, -fit, -boundary: the expected fate by the recalled fates'
-  vote instead of a fitted boundary), and contextual +active: the robot chooses its next object (`explore = "active"`,
-  aesop_torch/exploration.py) from the teacher's first;
+  vote instead of a fitted boundary, -replay: today's sequential rules instead of the knowledge re-derived from every
+  pair lived, -signed: no signed consistency), and contextual +active: the robot chooses its next object
+  (`explore = "active"`, aesop_torch/exploration.py) from the teacher's first;
 - extended, extended -rules, extended -prior (its readout without the physics priors);
 - on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
   rules off, what its readout can do when the knowledge is right;
@@ -25,7 +26,15 @@ irrelevant and how often it ends dominant (of (set, order)); and for the paper m
 irrelevant (a physically wrong elimination). Last line:
 `paper_err_24= paper_err_64= paper_err_230= paper_rules_off_ratio_230= paper_order_agreement_8= extended_err_8=
 extended_rules_off_ratio_24=` (err_24 from the sets of 24, err_64 and err_230 from the lives; a ratio is the ablated
-model's error over the model's). `--record` writes the output into BENCHMARKS.md.
+model's error over the model's), then the contextual model's (issue 45): `contextual_err_24= contextual_err_64=
+contextual_err_230= contextual_order_agreement_24= contextual_right_functional_24= contextual_right_functional_230=
+contextual_right_strict_230= contextual_rules_off_ratio_24= contextual_rules_off_ratio_64=
+contextual_rules_off_ratio_230= contextual_gating_off_ratio_230= contextual_active_err_24=
+contextual_life_time_ratio=`: order agreement the share of sets of 24 with the same per-context knowledge in every
+order; functionally right the share of (set, order) whose final knowledge has in each context exactly what decides it
+dominant (floaters: weight; sinkers: fill and size; fate: fill, size and weight), strict and every other property
+irrelevant; active err `n/a` without the `contextual +active` condition; the time ratio a life's contextual over paper
+wall time (medians over lives, side by side). `--record` writes the output into BENCHMARKS.md.
 
 The agent conditions (the six above) run as the sweep benches/ablation.toml runs them: each (condition, set) is
 train/sweep.py's cell (`train.sweeps.cell.run_cell`, one code path) and their figures are train/report.py's medians, so
@@ -71,7 +80,8 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual": ("contextual", ()), "contextual -rules": ("contextual", ("rules",)),
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
-          "contextual -boundary": ("contextual", ("boundary",)),
+          "contextual -boundary": ("contextual", ("boundary",)), "contextual -replay": ("contextual", ("replay",)),
+          "contextual -signed": ("contextual", ("signed",)),
           "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
@@ -165,7 +175,7 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
         agent.hub.strength[:, :len(given)] = torch.tensor(given)
     errs = {}
     active = cfg.explore == "active"
-    if active:   # the robot chooses its next object (as train/sweep.py run_cell)
+    if active:   # the robot chooses its next object (as train.sweeps.cell.run_cell)
         from aesop_torch.exploration import choose_in_order
         seen = agent.activities(meas)
     for t in range(n_train):
@@ -242,6 +252,27 @@ def right_per_context(key: str | None) -> bool:
         return False
     got = dict(part.split(":") for part in key.split(";"))
     return all(len(got[c]) == len(w) and all(x == "." or x == y for x, y in zip(w, got[c])) for c, w in RIGHT.items())
+
+
+# what decides the outcome in each context (the issue's "functionally right"): floaters displace their weight,
+# sinkers their volume (fill and size), and the fate depends on all three; letters per SPLIT_PROPERTIES
+DECIDES = {"floating": "....D", "sinking": ".D.D.", "fate": ".D.DD"}
+
+
+def functionally_right(key: str | None, strict: bool = False) -> bool:
+    """A context_knowledge string with, in every context, exactly the properties that decide it dominant (DECIDES);
+    strict: and every other property irrelevant."""
+    if not key:
+        return False
+    got = dict(part.split(":") for part in key.split(";"))
+    return all(len(got[c]) == len(w) and all((y == "D") == (x == "D") and (not strict or x == "D" or y == "I")
+                                             for x, y in zip(w, got[c])) for c, w in DECIDES.items())
+
+
+def right_share(table, condition: str, group: str, strict: bool = False) -> float:
+    """The share of the group's (set, order) whose final knowledge is functionally (or strictly) right."""
+    rows = final_rows(table, condition, group)
+    return sum(functionally_right(r["context_knowledge"], strict) for r in rows) / max(len(rows), 1)
 
 
 def context_agreement(table, condition: str, group: str) -> float:
@@ -331,13 +362,13 @@ def main():
             parts = [torch.cat([r["state"][:, r["properties"].index(prop)] for r in res[k, c]])
                      for k in ("8", "24", "life")]
             return "/".join(f"{float((x == code).float().mean()):.2f}" for x in parts)
-        print(f"{c:<17}{same('8', c):>10.3f}{same('24', c):>10.3f}  {share('color', IRRELEVANT)}  "
+        print(f"{c:<17}{_fmt(same('8', c), 3):>10}{_fmt(same('24', c), 3):>10}  {share('color', IRRELEVANT)}  "
               f"{share('color', DOMINANT)}  {share('weight', IRRELEVANT)}  {share('size', IRRELEVANT)}")
     print(f"{time.perf_counter() - t0:.0f} s")
 
     def ratio(c, base, kind, n):
         return err(kind, c, n) / max(err(kind, base, n), 1e-12)
-    line = {}
+    line, ctx = {}, {}
     if "paper" in conditions:
         line["paper_err_24"] = err("24", "paper", 24)
         line["paper_err_64"] = err("life", "paper", 64) if 64 in life_checks else float("nan")
@@ -352,29 +383,50 @@ def main():
         right = [right_per_context(r["context_knowledge"]) for r in final_rows(rows, "contextual", GROUPS["life"])]
         for r in final_rows(rows, "contextual", GROUPS["life"])[:8]:
             print(f"  life {r['set']}: {r['context_knowledge']}")
+        ratio_t = float("nan")
         if "paper" in conditions and times.get(("paper", GROUPS["life"])):
             ratio_t = (statistics.median(times["contextual", GROUPS["life"]])
                        / statistics.median(times["paper", GROUPS["life"]]))
             print(f"a life of {a.life_objects} objects: contextual {statistics.median(times['contextual', GROUPS['life']]):.0f} s, "
                   f"paper {statistics.median(times['paper', GROUPS['life']]):.0f} s (medians over lives, one process "
                   f"each, side by side): {ratio_t:.2f}x")
-        line["contextual_err_24"] = err("24", "contextual", 24) if a.long_sets else float("nan")
-        line["contextual_err_64"] = err("life", "contextual", 64) if 64 in life_checks else float("nan")
-        line["contextual_err_230"] = err("life", "contextual", last)
-        if "contextual -rules" in conditions:
-            if 64 in life_checks:
-                line["contextual_rules_off_ratio_64"] = ratio("contextual -rules", "contextual", "life", 64)
-            line["contextual_rules_off_ratio_230"] = ratio("contextual -rules", "contextual", "life", last)
-        if "contextual -context" in conditions:
-            line["contextual_context_off_ratio_230"] = ratio("contextual -context", "contextual", "life", last)
+        nan = float("nan")
+        ctx["contextual_err_24"] = err("24", "contextual", 24) if a.long_sets else nan
+        ctx["contextual_err_64"] = err("life", "contextual", 64) if 64 in life_checks else nan
+        ctx["contextual_err_230"] = err("life", "contextual", last)
+        ctx["contextual_order_agreement_24"] = context_agreement(rows, "contextual", GROUPS["24"]) if a.long_sets else nan
+        ctx["contextual_right_functional_24"] = right_share(rows, "contextual", GROUPS["24"]) if a.long_sets else nan
+        ctx["contextual_right_functional_230"] = right_share(rows, "contextual", GROUPS["life"])
+        ctx["contextual_right_strict_230"] = right_share(rows, "contextual", GROUPS["life"], strict=True)
+        off = "contextual -rules" in conditions
+        ctx["contextual_rules_off_ratio_24"] = (ratio("contextual -rules", "contextual", "24", 24)
+                                                if off and a.long_sets else nan)
+        ctx["contextual_rules_off_ratio_64"] = (ratio("contextual -rules", "contextual", "life", 64)
+                                                if off and 64 in life_checks else nan)
+        ctx["contextual_rules_off_ratio_230"] = ratio("contextual -rules", "contextual", "life", last) if off else nan
+        ctx["contextual_gating_off_ratio_230"] = (ratio("contextual -gating", "contextual", "life", last)
+                                                  if "contextual -gating" in conditions else nan)
+        # the robot choosing its next object (--explore active), when the condition exists
+        ctx["contextual_active_err_24"] = (err("24", "contextual +active", 24)
+                                           if "contextual +active" in conditions and a.long_sets else "n/a")
+        ctx["contextual_life_time_ratio"] = ratio_t
+        for c in ("contextual -context", "contextual -replay", "contextual -signed"):
+            if c in conditions:
+                line[c.replace(" -", "_") + "_off_ratio_230"] = ratio(
+                    c, "contextual", "life", last)
         line["contextual_right_knowledge_230"] = sum(right) / max(len(right), 1)
-        if a.long_sets:
-            line["contextual_order_agreement_24"] = context_agreement(rows, "contextual", GROUPS["24"])
     if "extended" in conditions:
         line["extended_err_8"] = err("8", "extended", 8)
         if "extended -rules" in conditions:
             line["extended_rules_off_ratio_24"] = ratio("extended -rules", "extended", "24", 24)
-    print(" ".join(f"{k}={v:.4f}" for k, v in line.items()))
+    print(" ".join(f"{k}={_fmt(v)}" for k, v in line.items()))
+    if ctx:   # the contextual model's figures (issue 45), last
+        print(" ".join(f"{k}={_fmt(v)}" for k, v in ctx.items()))
+
+
+def _fmt(v, digits: int = 4) -> str:
+    """A figure to print: n/a where there is none (order agreement over one order is None)."""
+    return "n/a" if v is None else f"{v:.{digits}f}" if isinstance(v, (int, float)) else str(v)
 
 
 if __name__ == "__main__":

@@ -180,3 +180,15 @@ def test_a_tiny_learning_curve_run_prints_the_sweeps_figures(tmp_path, local_ray
     change = [r["probe_rel_error"] - before[r["cell"]] for r in rows if r["episode"] == 10]
     row10 = next(x for x in lines if x.split()[:1] == ["10"]).split()
     assert row10[8] == f"{sum(d < 0 for d in change)}/{sum(d > 0 for d in change)}"
+
+
+def test_functionally_and_strictly_right_knowledge_per_context(ablation):
+    """Functionally right: in each context exactly what decides it dominant (floaters weight; sinkers fill and size;
+    the fate fill, size and weight); strictly: and the rest irrelevant (letters color fill elongation size weight)."""
+    right = ablation.functionally_right
+    assert right("floating:IIIID;sinking:IDIDI;fate:IDIDD", strict=True)
+    assert right("floating:ULLUD;sinking:LDUDL;fate:LDLDD") and not right("floating:ULLUD;sinking:LDUDL;fate:LDLDD",
+                                                                           strict=True)
+    assert not right("floating:IIIID;sinking:IDIDI;fate:ILIDD")          # fill not dominant for the fate
+    assert not right("floating:IIIDD;sinking:IDIDI;fate:IDIDD")          # size dominant among floaters
+    assert not right(None)

@@ -5,8 +5,9 @@ originals are aesop_torch.agent.MODELS and .ABLATIONS; tests/test_sweep.py holds
 from __future__ import annotations
 
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "boundary"),
-             "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
+ABLATIONS = {"paper": ("rules", "gating"),                            # and .ABLATIONS
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed"),
+             "extended": ("rules", "gating", "prior")}
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
 # and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
 MODEL_HELP = {
@@ -26,6 +27,10 @@ ABLATION_HELP = {
     "prior": "the readout's fit without its physics priors",
     "boundary": "the expected fate from the recall-weighted vote of the recalled fates instead of a boundary fitted "
                 "over them",
+    "replay": "the sequential rules, judging each comparison once as it comes, instead of the knowledge re-derived "
+              "from every pair of episodes lived after each episode",
+    "signed": "replay without signed consistency (Growth on a property whose change had the outcome's sign in every "
+              "clear contradicted pair)",
 }
 
 
