@@ -15,8 +15,12 @@ from dataclasses import dataclass
 import torch
 
 from .fitted_readout import log_mass, log_size
-from .contextual_rules import FATE
 from .rules import STATUS_QUO, context_of, contradiction, outcome_unclear
+
+# the contextual model's contexts (contextual_rules.ContextualRules keeps a set of strengths for each): what decides
+# the reward among floaters, among sinkers, and what decides the fate. Here, below the rules and replay that use them
+CONTEXTS = ("floating", "sinking", "fate")
+FLOATING, SINKING, FATE = range(3)
 
 
 def cannot_tell(unclear: torch.Tensor, contradicted: torch.Tensor, outcome_unclear: torch.Tensor) -> torch.Tensor:

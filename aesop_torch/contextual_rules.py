@@ -41,11 +41,10 @@ import torch
 from torch import nn
 
 from .incremental_rules import certainties_of, edited, states_of
+from .comparisons import CONTEXTS, FATE, FLOATING, SINKING  # noqa: F401   (the model's contexts, named here too)
+from .replay import add_episode, unflatten
 from .rules import (DOMINANT, ELIMINATION, GROWTH, IRRELEVANT, LIKELY_IRRELEVANT, PROPERTIES, STATES, STATUS_QUO,
                     UNCERTAINTY, UNKNOWN, RulesConfig)
-
-CONTEXTS = ("floating", "sinking", "fate")
-FLOATING, SINKING, FATE = range(3)
 
 
 class ContextualRules(nn.Module):
@@ -88,7 +87,6 @@ class ContextualRules(nn.Module):
         B, M = self.lived_outcome.shape
         if self.pair_dc.shape[:2] == (B, M) and torch.equal(self.cached_count, self.lived_count):
             return
-        from .replay import add_episode, unflatten
         values, outcome, fate, count = (self.lived_values.clone(), self.lived_outcome.clone(), self.lived_fate.clone(),
                                         self.lived_count.clone())
         self._empty_cache(B, M, len(self.properties))

@@ -38,8 +38,7 @@ from __future__ import annotations
 
 import torch
 
-from .comparisons import cannot_tell, delta_property
-from .contextual_rules import CONTEXTS, FATE, FLOATING, SINKING
+from .comparisons import CONTEXTS, FATE, FLOATING, SINKING, cannot_tell, delta_property
 from .fitted_readout import log_mass, log_size
 from .rules import ELIMINATION, GROWTH, UNCERTAINTY, contradiction, outcome_unclear
 

@@ -164,7 +164,7 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     model, ablate, given = GIVEN[condition] if condition in GIVEN else (*MODELS[condition], None)
     cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
     if condition in OVERRIDES:
-        from train.config import apply_overrides
+        from train.common.config import apply_overrides
         cfg = apply_overrides(cfg, OVERRIDES[condition])
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)

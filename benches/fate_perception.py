@@ -2,7 +2,7 @@
 
     python benches/fate_perception.py [--objects N] [--seed S]
 
-The closed-form runs (train/experiment.py closed_form_outcomes, the benches, the battery's jar life) tell the agent
+The closed-form runs (train/learning/experiment.py closed_form_outcomes, the benches, the battery's jar life) tell the agent
 the fate a model of the robot's perception gives (sim/sensor_model.py FatePerception), not the engine's density
 test. This bench measures what that model stands on: N generated objects (the generator's shapes and sizes, in
 the default jar), their densities log-uniform over 0.8-1.25 g/cm^3 (the band where a floater rides deep and a sinker

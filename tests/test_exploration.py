@@ -58,14 +58,14 @@ def small_set():
     from sim.make_objects import generate
     from sim.objects import parse_objects
     from sim.sensor_model import SensorModel
-    from train.experiment import closed_form_outcomes
+    from train.learning.experiment import closed_form_outcomes
     objs = parse_objects(generate(1000, 8, 3, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=1000)
     return [o.name for o in objs.train], [o.name for o in objs.probe], outcomes, probes
 
 
 def _experiment(small_set, explore, orders):
-    from train.experiment import Experiment
+    from train.learning.experiment import Experiment
     names, pnames, outcomes, probes = small_set
     exp = Experiment(names, pnames, copy.deepcopy(orders), seed=0,
                      config=AgentConfig.contextual(explore=explore, fate_recalls=4))
@@ -74,7 +74,7 @@ def _experiment(small_set, explore, orders):
 
 
 def test_an_active_experiment_rewrites_its_orders_and_resumes_as_if_never_stopped(small_set):
-    from train.experiment import Experiment
+    from train.learning.experiment import Experiment
     teacher = [[0, 1, 2, 3, 4, 5, 6, 7], [7, 6, 5, 4, 3, 2, 1, 0]]
     whole = _experiment(small_set, "active", teacher)
     while not whole.done:
@@ -100,7 +100,7 @@ def test_an_active_experiment_rewrites_its_orders_and_resumes_as_if_never_stoppe
 
 
 def test_the_population_of_active_agents_ends_as_the_experiment(small_set):
-    from train.population import run_population
+    from train.learning.population import run_population
     names, pnames, outcomes, probes = small_set
     teacher = [[0, 1, 2, 3, 4, 5, 6, 7], [7, 6, 5, 4, 3, 2, 1, 0], [3, 1, 4, 0, 5, 2, 7, 6]]
     exp = _experiment(small_set, "active", teacher)
@@ -108,13 +108,13 @@ def test_the_population_of_active_agents_ends_as_the_experiment(small_set):
         exp.step(lambda name, b, t: exp.outcomes[name])
     pop = run_population(names, pnames, teacher, outcomes, probes, exp.config, chunk=2)
     assert pop["chosen_orders"] == exp.orders
-    from train.population import knowledge_keys
+    from train.learning.population import knowledge_keys
     assert pop["final_knowledge"] == knowledge_keys(exp.agent.rules.state)
 
 
 def test_the_runner_takes_explore_as_a_flag_and_keeps_it_in_run_json(tmp_path):
     from train import run
-    from train.run_config import run_settings
+    from train.runner.settings import run_settings
     args = run.parse_args(["--explore", "active", "--model", "contextual", "--out", str(tmp_path / "out")])
     assert args.overrides["explore"] == "active"
     objects = run.load_run_objects(args)

@@ -12,7 +12,7 @@ from aesop_torch.contextual_rules import FATE, FLOATING, SINKING
 from sim.make_objects import generate
 from sim.objects import parse_objects
 from sim.sensor_model import SensorModel
-from train.experiment import closed_form_outcomes, stack_measurements
+from train.learning.experiment import closed_form_outcomes, stack_measurements
 
 RED, BLUE, GREEN = (0.85, 0.1, 0.1), (0.1, 0.2, 0.85), (0.1, 0.8, 0.2)
 COLOR, FILL, ELONGATION, SIZE, WEIGHT = range(5)
@@ -171,7 +171,7 @@ def test_replay_resumes_from_the_lived_store_alone(developed):
 
 def test_a_contextual_checkpoint_from_before_replay_is_refused_in_one_line():
     """A checkpoint's agent state without the lived store (written before replay) is refused naming what is missing."""
-    from train.checkpoint import _agent_problem
+    from train.learning.checkpoint import _agent_problem
     config = AgentConfig.contextual(seed=0)
     config.memory.max_episodes = config.hub.max_assemblies = 4
     state = Agent(config, batch=2, develop=False).state_dict()
@@ -206,9 +206,10 @@ def _capped_cue_recalls_the_fate_of_the_likelier_twin(developed, ceiling):
     fate (3, by hand), nothing else known. A red 4 cm cube of 100 g shares the sinker's colour and size and the
     floater's weight (fill and elongation all alike). Read at its strength the weight pathway counts as three, and the
     cue recalls the floater's fate; capped at 1 (`cue_ceiling`), two shared properties outweigh one: it sinks (as it
-    does: 100 g in 64 cm^3)."""
+    does: 100 g in 64 cm^3). The fate is read by the recalled fates' vote (`--ablate boundary`), where the cue alone
+    decides which fate wins (a boundary fitted over the two would read the weight's slope as well)."""
     agent = fresh(developed)
-    agent.config = AgentConfig.contextual(seed=0, cue_ceiling=ceiling)
+    agent.config = AgentConfig.contextual(seed=0, cue_ceiling=ceiling, ablate=("boundary",))
     remember = lambda m, cm3, s: agent.remember(m, torch.tensor([cm3]), torch.tensor([False]),  # noqa: E731
                                                 torch.tensor([False]), sank=torch.tensor([s]))
     remember(cube(6.0, 100, BLUE), 100.0, False)
