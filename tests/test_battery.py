@@ -273,7 +273,7 @@ def test_bench_help():
     assert r.returncode == 0 and "--ablate" in r.stdout and "--record" in r.stdout and "--models" in r.stdout
 
 
-def bench_model() -> str:
+def bench_module():
     import importlib.util
     spec = importlib.util.spec_from_file_location("battery_bench", ROOT / "benches" / "battery.py")
     sys.path.insert(0, str(ROOT / "benches"))
@@ -282,7 +282,25 @@ def bench_model() -> str:
         spec.loader.exec_module(module)
     finally:
         sys.path.remove(str(ROOT / "benches"))
-    return module.MODEL
+    return module
+
+
+def bench_model() -> str:
+    return bench_module().MODEL
+
+
+def test_record_rewrites_the_readmes_battery_block_and_nothing_else(tmp_path):
+    bench = bench_module()
+    f = tmp_path / "README.md"
+    f.write_text("a\n<!-- bench:battery -->\nold table\n<!-- /bench:battery -->\nb\n")
+    bench.write_readme_block("new table\n", f)
+    assert f.read_text() == "a\n<!-- bench:battery -->\nnew table\n<!-- /bench:battery -->\nb\n"
+    g = tmp_path / "OTHER.md"
+    g.write_text("no block\n")
+    with pytest.raises(ValueError, match="bench:battery"):
+        bench.write_readme_block("x", g)
+    assert g.read_text() == "no block\n"
+    assert "<!-- bench:battery -->" in (ROOT / "README.md").read_text()
 
 
 @pytest.mark.timeout(300)

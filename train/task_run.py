@@ -1,13 +1,15 @@
 """One task of the Aesop battery with physics: `train/run.py --objects sim/tasks/<task>.json`.
 
 The task's tubes are built in pybullet (sim/tubes.py) and seen from the camera (sim.perception.perceive_tube): each
-tube's width, level and the look of what fills it become the agent's context properties, as train/battery.py's
-agents have them, but measured from images instead of read from the file. Every (tube, object) option, and every
-exploration drop, is simulated from the task's starting levels (each trial is set up afresh, as in the studies), and
-its reward tube's rise is measured from the simulation. pybullet is deterministic, so each distinct drop is simulated
-once and its measured outcome replayed on every trial that repeats it. Then `--orders` naive subjects of `--seed`,
-pre-trained on stones in a jar-like tube (the closed form's: the pre-training is no part of the task), meet the task
-on trial 1 and play its 20 trials, its tubes mirrored on half of them (train.battery.run_task).
+tube's width and the look of what fills it become the agent's context properties, as train/battery.py's agents
+have them, but measured from images instead of read from the file. A trial is drops with the water carried over
+(train.battery.play): every drop is simulated from the levels it meets, in a world whose tubes stand at those
+levels (the trial's earlier objects are not in it, their water is: a stone that would land on an earlier floater
+and hold it under is not simulated so; tests/test_apparatus.py measures that difference), and its reward tube's
+rise is measured. pybullet is deterministic, so each distinct (levels, tube, object) is simulated once and replayed.
+Then `--orders` naive subjects of `--seed`, pre-trained to the criterion on stones in a jar-like tube (the closed
+form's: the pre-training is no part of the task), meet the task on trial 1 and play its 20 trials, its tubes
+mirrored on half of them (train.battery.run_task).
 
 Writes into --out: summary.json (the perceived tubes, each option's simulated and closed-form rise, every agent's
 choices, the scores), tb/ (per trial: the share of agents choosing right, the mean rise they got) and, with
