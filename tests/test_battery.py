@@ -305,9 +305,10 @@ def test_record_rewrites_the_readmes_battery_block_and_nothing_else(tmp_path):
 
 @pytest.mark.timeout(300)
 def test_bench_last_line_on_a_tiny_run(tmp_path):
-    """2 subjects, 3 trials, one task and one conflict task, the transfer model with its rules on and off."""
+    """2 subjects, 2 trials, one task and one conflict task, the transfer model with its rules on and off: ~20 s of
+    CPU (--quick's 8 jar objects)."""
     r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--quick", "--tasks",
-                        "sinking_vs_floating", "large_light_vs_small_heavy", "--trials", "3", "--workers", "1",
+                        "sinking_vs_floating", "large_light_vs_small_heavy", "--trials", "2", "--workers", "1",
                         "--out", str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=280)
     assert r.returncode == 0, r.stderr
     last = r.stdout.splitlines()[-1]
