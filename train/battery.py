@@ -1,18 +1,23 @@
 """The Aesop battery as the animal studies run it: a subject meets the test apparatus and the test objects for the
-first time on trial 1, chooses among (tube, object) options on each trial, learns from each outcome, and its choices
+first time on trial 1, drops objects one by one into the tubes it chooses, learns from each drop, and its choices
 are analysed as the studies analyse theirs.
 
 The protocol (run_task):
-- Pre-training, as the studies' subjects had it: stones of a few sizes (sinking objects, none of them a test
-  object) dropped into a single tube of water with a floating reward (a jar-like tube, not the test apparatus),
-  learning from each drop (Agent.step). Nothing else comes before trial 1: no subject drops anything into the test
-  apparatus, nor handles a test object, before it (`Subjects.log` records every episode and its phase).
+- Subjects are independent: each has maps developed from its own seed (train/own_maps.py), its own perception noise,
+  positions and choice draws. Naive and experienced subjects of one seed are the same animal before their
+  histories differ (paired).
+- Pre-training, as the studies' subjects had it, to a criterion (pretrain): trials of stones of a few sizes (none of
+  them a test object) dropped into a single tube of water with a floating reward (a jar-like tube, not the test
+  apparatus), until `Protocol.criterion` trials in a row are solved with the fewest drops. Nothing else comes before
+  trial 1 (`Subjects.log` records every episode and its phase).
 - Two kinds of subject: naive (pre-training only) and experienced (a jar life first: `jar_objects` generated objects
   dropped into a jar, the Crow and Pitcher experiment itself with closed-form outcomes, then the pre-training).
-- Each trial: per option, the agent predicts the reward's rise by recall (Agent.predict) and values the option by
-  what that rise does for the reward it raises: the predicted rise less the reward's gap (how far below reach it is
-  seen). The choice is a softmax over the values at `Protocol.temperature`. Then it acts (the closed form
-  `sim.apparatus.outcome` is the world), observes the reward's rise and learns (Agent.step).
+- A trial (play): the water starts `drops_to_reach` functional drops below reach and `objects_each` of every object
+  lie ready. On each drop the agent predicts every option's rise by recall (Agent.predict) and values it as that
+  rise less the reward's gap (how far below reach it is seen now); the choice is a softmax over the values at
+  `Protocol.temperature`, whose P(correct) is recorded. It drops (the closed form `sim.apparatus.outcome` is the
+  world), sees the reward rise and the object's fate, and learns (Agent.step); the water carries over and the trial
+  ends when the reward is in reach or the objects run out. Objects are seen through the jar life's sensor model.
 - Tube and object positions are counterbalanced: on half the trials of each subject, in an order drawn from its own
   generator, the apparatus is mirrored (left and right swapped); each tube's place is a context property the agent
   perceives (EncoderConfig.context), so the correct side is not fixed.
@@ -20,9 +25,9 @@ The protocol (run_task):
 The apparatus enters each episode as context properties (the substrate's look, the tube's width, its level and
 place), each on a SOM map of its own; the rules judge them with the object's properties (AgentConfig.properties).
 
-The analysis (analyse): per task and kind, trial-1 performance with its 95 % interval, a learning slope from a
-logistic model of correct choice on trial number with a per-subject intercept (Ghirlanda & Lind 2017), each subject's
-exact binomial test, and P(correct | previous correct) vs P(correct | previous wrong) (Hennefield et al. 2018).
+The analysis: train/battery_stats.py (the conditional-logit slope, Holm, the paired transfer gain) and here each
+subject's exact binomial test, P(correct | previous correct) vs P(correct | previous wrong) (Hennefield et al.
+2018) and the older logistic slope with a per-subject intercept (learning_slope, kept for its tests).
 """
 
 from __future__ import annotations
