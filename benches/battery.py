@@ -387,8 +387,8 @@ def main(argv=None) -> None:
     for t in study:
         if CROWS.get(t) == "failed" and merged[(M, (), kind, t)]["passed"]:
             r = merged[(M, (), kind, t)]
-            print(f"  {t}: the crows failed, the model passes (t1 {interval(r['t1'])}, func {r['functional']['mean']:.2f}):"
-                  f" every drop's outcome is seen (the reward rises in one tube and not the other) and stored with "
+            print(f"  {t}: the crows failed, the model passes (t1 {interval(r['t1'])}, "
+                  f"func {r['functional']['mean']:.2f}): every drop's outcome is seen (the reward rises in one tube and not the other) and stored with "
                   f"the tube's width, level and place, each on a map of its own, so recall tells the tubes apart "
                   f"from the first trial's drops; the crows did not learn these in their trials")
     print("\npublished (crows | rooks | jays | children):")

@@ -8,7 +8,6 @@ import random
 import re
 import subprocess
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -19,8 +18,8 @@ from aesop_torch.agent import Agent
 from aesop_torch.encoders import (MAP_NAMES, EncoderConfig, SensoryEncoder, default_map_configs,
                                   developmental_samples)
 from sim.apparatus import load_task
-from train.battery import (CONTEXT, REWARD_SCALE, Protocol, Subjects, balanced_swaps, binomial_tail, context_agent,
-                           make_config, make_subjects, play, run_task, score, softmax_choice, task_world)
+from train.battery import (Protocol, balanced_swaps, binomial_tail, make_config, make_subjects, play, run_task, score,
+                           softmax_choice, task_world)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ROOT / "sim" / "tasks"

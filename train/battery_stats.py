@@ -87,14 +87,16 @@ def conditional_logit_slope(right: list[list[bool]], bound: float = 50.0) -> dic
     if not inf:
         return {"slope": 0.0, "ci": (-math.inf, math.inf), "p": 1.0, "subjects": 0, "n": n, "separated": 0,
                 "note": "not estimable: every subject chose alike on every trial"}
-    ll = lambda b: conditional_loglik(inf, b)
+    def ll(b):
+        return conditional_loglik(inf, b)
     sep = _separation(inf)
     if sep:
         top = ll(sep * bound)
         b_hat = sep * math.inf
     else:
         # the log-likelihood is concave in b: its maximum by bisection on the numerical derivative
-        d = lambda b: ll(b + 1e-6) - ll(b - 1e-6)
+        def d(b):
+            return ll(b + 1e-6) - ll(b - 1e-6)
         lo, hi = -1.0, 1.0
         while d(lo) < 0 and lo > -bound:
             lo *= 2
@@ -102,7 +104,8 @@ def conditional_logit_slope(right: list[list[bool]], bound: float = 50.0) -> dic
             hi *= 2
         b_hat = _root(d, lo, hi)
         top = ll(b_hat)
-    cut = lambda b: 2 * (top - ll(b)) - CHI2_95
+    def cut(b):
+        return 2 * (top - ll(b)) - CHI2_95
     centre = b_hat if math.isfinite(b_hat) else sep * bound
     lo_b = -math.inf if cut(-bound) < 0 else _root(cut, -bound, centre)
     hi_b = math.inf if cut(bound) < 0 else _root(cut, centre, bound)

@@ -164,7 +164,8 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
     start = task.start_levels()
     options = []
     for i, (tube, obj) in enumerate(task.options()):
-        sim_out, closed = world.outcome(task, start, tube, obj), outcome(task, dict(start), tube, obj)   # from the file's levels
+        # from the file's levels
+        sim_out, closed = world.outcome(task, start, tube, obj), outcome(task, dict(start), tube, obj)
         options.append({"option": f"{tube.name}:{obj.name}", "correct": i in result["correct"],
                         "simulated_rise_cm": round(sim_out["reward_rise_cm"], 4),
                         "closed_form_rise_cm": round(float(closed["reward_rise_cm"]), 4),
