@@ -1,32 +1,36 @@
-"""The Aesop battery as a learning experiment: subjects meet each task's apparatus on trial 1 and learn from it.
+"""The Aesop battery as the animals ran it: independent subjects meet each task's apparatus on trial 1, drop
+objects one by one with the water carried over, and learn; transfer is the gain of subjects that lived the jar life
+over naive ones on trial 1.
 
-    python benches/battery.py [--seeds 2] [--subjects 3] [--first-seed 100] [--models extended paper]
+    python benches/battery.py [--subjects 20] [--first-seed 100] [--models contextual paper]
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
                               [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
 
-Per task (sim/tasks/<task>.json) and per kind of subject (train/battery/tasks.py): naive subjects have the studies'
-pre-training only (stones into a single jar-like tube of water), experienced ones a jar life of --jar-objects
-generated objects first. Every subject meets the test apparatus and objects on trial 1, chooses by a softmax over
-each option's value (its predicted rise less the reward's gap), the apparatus mirrored on half the trials, and
-learns from every outcome. Subjects: --subjects per seed, each seed developing its own maps; the transfer model
-(MODEL) always runs with its rules off too (--ablate rules: every model does).
+Per task (sim/tasks/<task>.json: the 8 studies' tasks and 3 conflict tasks of this project) and condition (model,
+rules on or off, kind), --subjects independent subjects (train/battery/tasks.py: each its own maps, perception noise,
+positions and choices from its own seed; naive and experienced subjects of one seed are the same animal before
+their histories differ, so conditions are compared paired). Naive subjects have the studies' pre-training, to a
+criterion; experienced ones a jar life of --jar-objects generated objects first. A trial is drops until the reward
+is in reach or the objects run out; the first drop of each trial is scored, and the softmax's expected P(correct)
+on it is recorded (no single draws). The transfer model (MODEL) always runs with its rules off too.
 
-Printed per model, rules and kind: per task trial 1 (% right, 95 % Wilson interval), the learning slope per trial
-from a logistic model with an intercept per subject and its 95 % interval (Ghirlanda & Lind 2017; "sep." where
-perfect separation leaves it infinite and an exact test decides), the subjects passing their own exact binomial
-test, P(right | previous right) / P(right | previous wrong) (Hennefield et al. 2018), and the spread of the
-subjects' share right. Beside it the animals' results with their citations. Learning curves (trial by trial, the
-95 % interval over subjects as a band) go to --out, or with --record to benches/battery_curves.png (tracked) with
-the output in BENCHMARKS.md. Last line:
-`transfer_trial1_<M>= transfer_trial1_<M>_rules_off= transfer_trial1_paper= learned_tasks_naive_<M>=N/8
-crows_agreement=K/6`: the experienced subjects' trial-1 rate over the object tasks, the naive subjects' tasks with
-a slope above 0 at 95 %, and the tasks where the experienced subjects of M pass or fail as the crows did (Jelbert et
-al. 2014), out of those both did. The protocol's numbers were chosen on seeds 1000 and up, never the bench's.
+Printed per condition and task: trial 1 (the subjects' mean expected P(correct) [95 % t], n), the learning slope
+per trial from a conditional logit [95 % likelihood-ratio interval, which holds under separation], its Holm-
+adjusted one-sided p over the tasks, learned (the project's rule: trial 1 not above chance and the Holm p < 0.05),
+the subjects passing their own binomial test, the share of functional drops and drops per trial. Then the transfer
+gains (paired, experienced - naive, expected P(correct) on trial 1), the crows' pattern beside a pass-everything
+model's, and the animals' results. With --record the output goes to BENCHMARKS.md (its block `battery`) and the
+battery section's table there is rewritten from it; the learning curves go to benches/battery_curves.png. The last line:
+`transfer_gain_<M>=G [lo, hi] transfer_gain_<M>_rules_off=G [lo, hi] conflict_trial1_experienced=
+conflict_trial1_experienced_rules_off= conflict_trial1_naive= learned_tasks_naive_<M>=K/8 crows_agreement=K/6
+pass_everything_agreement=K/6 subjects=N`. The protocol's numbers were chosen on seeds 1000 and up, never the
+bench's.
 """
 
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
 from pathlib import Path
@@ -40,13 +44,16 @@ if __name__ == "__main__":
 from cli_args import at_least, count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
 
-# the transfer model of the last line: "extended" until the contextual model (AgentConfig.named("contextual"))
-# replaces it; switch it here
+# the transfer model of the last line; switch it here
 MODEL = "contextual"
 TASKS = ("water_vs_sand", "sinking_vs_floating", "solid_vs_hollow", "high_vs_low_water", "narrow_vs_wide", "u_tube",
          "large_vs_small", "water_vs_sawdust")
-OBJECT_TASKS = ("sinking_vs_floating", "solid_vs_hollow", "large_vs_small")
+# the project's conflict tasks: the option that looks like the pre-training stones is wrong, or the larger sinker is
+# the lighter one; where the jar life is necessary (BENCHMARKS.md, "The Aesop battery")
+CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_light_vs_small_heavy")
+ALL_TASKS = TASKS + CONFLICT
 PNG = ROOT / "benches" / "battery_curves.png"
+BENCHMARKS = ROOT / "BENCHMARKS.md"   # its battery section holds the table (<!-- table:battery -->)
 
 JELBERT = "Jelbert et al. 2014, PLoS ONE 9:e92895"
 LOGAN = "Logan et al. 2014, PLoS ONE 9:e103049"
@@ -72,7 +79,9 @@ PUBLISHED = {   # task: (crows, rooks, jays, children)
                         f"learned ({MILLER16})", NOT_TESTED, NOT_TESTED, f"passed ({MILLER16})"),
     "high_vs_low_water": (f"passed ({JELBERT})", NOT_TESTED, NOT_TESTED,
                           f"passed on trial 1, 5-9 y, no feedback ({MILLER17})"),
-    "narrow_vs_wide": (f"failed ({JELBERT})", NOT_TESTED, NOT_TESTED, NOT_CHECKED),
+    "narrow_vs_wide": (f"failed ({JELBERT})", NOT_TESTED, NOT_TESTED,
+                       f"tested, forced choice without feedback, 5-9 y ({MILLER17}); its result not checked here "
+                       f"(the abstract held offline is cut before it)"),
     "u_tube": (f"failed ({JELBERT}); modified U-tube failed as a group, one bird passed ({LOGAN})", NOT_TESTED,
                f"failed ({JAYS})", f"8-10 y passed from trial 1, 5-7 y as the birds ({CHILDREN})"),
     "large_vs_small": (NOT_TESTED, f"passed ({BIRD})", NOT_TESTED,
@@ -81,33 +90,45 @@ PUBLISHED = {   # task: (crows, rooks, jays, children)
 }
 
 
+NOTES = (f"jays: 2 of the 5 birds of {JAYS} took part in these tasks (a result of 2 birds).",
+         f"{JELBERT}'s tubes: the task files' sizes are this project's (5 and 8 cm tubes, 20 cm tall, 3 cm reach); "
+         f"the paper's own dimensions, experiment 5's included, were not checked against its text here.",
+         "the pass rule (more than half the subjects pass their own exact binomial test over the 20 first drops) "
+         "and the learned rule are this project's own, not a study's.")
+
+
 def conditions(models, kinds, ablate_all: bool) -> list[tuple]:
-    """(model, ablate, kind) to run: every model with its rules, the transfer model (or with --ablate rules every
-    model) without them too, each for every kind."""
+    """(model, ablate, kind) to run: every model with its rules for every kind; the transfer model's (or with
+    --ablate rules every model's) experienced subjects with their rules off too (their gain is taken over the naive
+    subjects with rules, who learned only from the pre-training)."""
     out = []
     for m in models:
-        for ab in ((), ("rules",)) if (ablate_all or m == models[0]) else ((),):
-            out += [(m, ab, k) for k in kinds]
+        out += [(m, (), k) for k in kinds]
+        if (ablate_all or m == models[0]) and "experienced" in kinds:
+            out.append((m, ("rules",), "experienced"))
     return out
 
 
 def _job(args):
-    """One (model, ablate, kind, seed): its subjects made once (jar life, pre-training), then every task from them."""
+    """One chunk of subjects through every condition and task: its subjects made once per condition (jar life,
+    pre-training), then every task from them. The chunk's maps are developed once per model's encoder."""
     import torch
     torch.set_num_threads(1)
     from sim.apparatus import load_task
     from train.battery.tasks import Protocol, make_subjects, run_task
-    model, ablate, kind, s, subjects, task_names, aim, jar_objects, trials = args
+    conds, seeds, task_names, aim, jar_objects, trials = args
     protocol = Protocol(jar_objects=jar_objects, trials=trials)
-    ready = {s: make_subjects(model, kind, s, subjects, ablate, protocol)}
+    tasks = {t: load_task(ROOT / "sim" / "tasks" / f"{t}.json") for t in task_names}
     out = {}
-    for t in task_names:
-        task = load_task(ROOT / "sim" / "tasks" / f"{t}.json")
-        r = run_task(task, model, [s], subjects, ablate, aim=aim, kind=kind, protocol=protocol, ready=ready)
-        r["peeks"] = peeks(r["log"], task)
-        del r["log"], r["scores"]
-        out[t] = r
-    return (model, ablate, kind, s), out
+    for model, ablate, kind in conds:
+        subj = make_subjects(model, kind, 0, len(seeds), ablate, protocol, seeds=seeds)
+        for t, task in tasks.items():
+            r = run_task(task, model, [0], len(seeds), ablate, aim=aim, kind=kind, protocol=protocol,
+                         ready={0: subj})
+            r["peeks"] = peeks(r["log"], task)
+            del r["log"], r["scores"]
+            out[(model, ablate, kind, t)] = r
+    return out
 
 
 def peeks(log, task) -> int:
@@ -118,27 +139,26 @@ def peeks(log, task) -> int:
 
 
 def curves_png(curves: dict, tasks, path: Path) -> None:
-    """Per task the share of subjects right on each trial, a line per (model, rules, kind), its 95 % Wilson band."""
+    """Per task the subjects' mean expected P(correct) on each trial's first drop, a line per condition, its 95 %
+    t band."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    from statsmodels.stats.proportion import proportion_confint
+    from train.battery.analysis import mean_interval
     cols = 4
     rows = (len(tasks) + cols - 1) // cols
     fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.2 * rows), squeeze=False)
     for ax, task in zip(axes.flat, tasks):
-        for label, (right, chance) in curves[task].items():
-            n = len(right)
-            x = list(range(1, len(right[0]) + 1))
-            k = [sum(r[t] for r in right) for t in range(len(x))]
-            lo, hi = proportion_confint(k, n, method="wilson")
-            line, = ax.plot(x, [v / n for v in k], marker=".", lw=1, label=label)
-            ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.12)
+        for lab, (p_right, chance) in curves[task].items():
+            x = list(range(1, len(p_right[0]) + 1))
+            iv = [mean_interval([p[t] for p in p_right]) for t in range(len(x))]
+            line, = ax.plot(x, [v["mean"] for v in iv], marker=".", lw=1, label=lab)
+            ax.fill_between(x, [v["ci"][0] for v in iv], [v["ci"][1] for v in iv], color=line.get_color(), alpha=0.12)
         ax.axhline(chance, color="grey", ls="--", lw=0.8)
         ax.set_title(task, fontsize=9)
         ax.set_ylim(-0.05, 1.05)
         ax.set_xlabel("trial")
-        ax.set_ylabel("share of subjects right")
+        ax.set_ylabel("expected P(correct), first drop")
     for ax in list(axes.flat)[len(tasks):]:
         ax.axis("off")
     axes.flat[0].legend(fontsize=6)
@@ -153,24 +173,97 @@ def label(model, ablate, kind) -> str:
     return f"{model}{', rules off' if ablate else ''}, {kind}"
 
 
+def interval(iv: dict, digits: int = 2) -> str:
+    lo, hi = iv["ci"]
+    return f"{iv['mean']:.{digits}f} [{lo:.{digits}f}, {hi:.{digits}f}]"
+
+
 def slope_text(s: dict) -> str:
-    if s["ci"] is not None:
-        return f"{s['slope']:+.2f} [{s['ci'][0]:+.2f}, {s['ci'][1]:+.2f}]"
-    if s["slope"] in (float("inf"), float("-inf")):
-        return f"sep.{'+' if s['slope'] > 0 else '-'} p={s['p']:.2g}"
-    return "n.e. (all alike)"
+    f = lambda x: "inf" if x == math.inf else "-inf" if x == -math.inf else f"{x:+.2f}"
+    if s["subjects"] == 0:
+        return "n.e. (all alike)"
+    return f"{f(s['slope'])} [{f(s['ci'][0])}, {f(s['ci'][1])}]"
+
+
+def analyse_all(done: dict, conds, tasks) -> dict:
+    """Per (model, ablate, kind, task): trial 1 (mean expected P(correct) [95 % t], n), the slope (conditional
+    logit), the subjects' binomial tests (train.battery.tasks.analyse), functional share, drops; per condition learned
+    (the project's rule, Holm over the studies' tasks and, apart, over the conflict tasks)."""
+    from train.battery.tasks import analyse
+    from train.battery.analysis import conditional_logit_slope, learned_tasks, mean_interval
+    merged = {}
+    for m, ab, k in conds:
+        for t in tasks:
+            r = done[(m, ab, k, t)]
+            a = analyse(r["right"], r["chance"])
+            merged[(m, ab, k, t)] = dict(
+                a, t1=mean_interval([p[0] for p in r["p_right"]]), cslope=conditional_logit_slope(r["right"]),
+                p_right=r["p_right"], right=r["right"], seeds=r["seeds"], swapped=r["swapped"], peeks=r["peeks"],
+                functional=mean_interval([sum(f) / len(f) for f in r["functional"]]),
+                drops=sum(sum(d) for d in r["drops"]) / sum(len(d) for d in r["drops"]),
+                pretrain=r["pretrain_trials"], options=r["options"], correct=r["correct"], chance=r["chance"])
+        for group in (TASKS, CONFLICT):
+            ts = [t for t in group if t in tasks]
+            if not ts:
+                continue
+            got = learned_tasks({t: merged[(m, ab, k, t)]["t1"] for t in ts},
+                                {t: merged[(m, ab, k, t)]["cslope"] for t in ts},
+                                {t: merged[(m, ab, k, t)]["chance"] for t in ts})
+            for t, (ok, p) in got.items():
+                merged[(m, ab, k, t)]["learned"], merged[(m, ab, k, t)]["holm_p"] = ok, p
+    return merged
+
+
+def per_subject_trial1(merged, cond, tasks) -> dict:
+    """{subject seed: its expected P(correct) on trial 1, averaged over `tasks`}."""
+    out = {}
+    for t in tasks:
+        r = merged[(*cond, t)]
+        for s, p in zip(r["seeds"], r["p_right"]):
+            out.setdefault(s, []).append(p[0])
+    return {s: sum(v) / len(v) for s, v in out.items()}
+
+
+def table_block(merged, conds, tasks, last: str, n: int, command: str) -> str:
+    """BENCHMARKS.md's battery table (between <!-- table:battery --> markers), from this run."""
+    head = [label(*c) for c in conds]
+    lines = [f"`{command}` ({n} subjects per condition; trial 1: mean expected P(correct) of the first drop [95 % t]; "
+             "slope per trial, conditional logit [95 % likelihood-ratio]; L: learned by the project's rule):", "",
+             "| task | " + " | ".join(head) + " |", "| --- |" + " --- |" * len(head)]
+    for t in tasks:
+        cells = []
+        for c in conds:
+            r = merged[(*c, t)]
+            cells.append(f"{interval(r['t1'])} / {slope_text(r['cslope'])}{' / L' if r.get('learned') else ''}")
+        lines.append(f"| {t.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    lines += ["", f"Last line: `{last}`"]
+    return "\n".join(lines)
+
+
+def write_table_block(text: str, path: Path = BENCHMARKS) -> None:
+    """Replace the block between <!-- table:battery --> and <!-- /table:battery --> (by rename)."""
+    import os
+    start, end = "<!-- table:battery -->", "<!-- /table:battery -->"
+    md = path.read_text()
+    i, j = md.find(start), md.find(end)
+    if i < 0 or j < i:
+        raise ValueError(f"{path.name}: no {start} ... {end} block to rewrite")
+    new = md[:i] + start + "\n" + text.rstrip() + "\n" + md[j:]
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(new)
+    os.replace(tmp, path)
 
 
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--seeds", type=count, default=2, help="seeds, each developing its maps for its subjects")
-    ap.add_argument("--subjects", type=count, default=3, help="subjects per seed (each its own seed for its jar "
-                                                              "life, positions and choices)")
+    ap.add_argument("--subjects", type=count, default=20, help="independent subjects per condition (each its own "
+                                                               "seed: first-seed * 1000 + i)")
     ap.add_argument("--first-seed", type=seed, default=100)
     ap.add_argument("--models", nargs="+", default=[MODEL, "paper"],
                     help=f"models, the first the transfer model of the last line (default {MODEL} paper)")
     ap.add_argument("--kinds", nargs="+", choices=("naive", "experienced"), default=["naive", "experienced"])
-    ap.add_argument("--tasks", nargs="+", choices=TASKS, default=list(TASKS), help="tasks to run (default all 8)")
+    ap.add_argument("--tasks", nargs="+", choices=ALL_TASKS, default=list(ALL_TASKS),
+                    help="tasks to run (default the 8 studies' and the 3 conflict tasks)")
     ap.add_argument("--ablate", choices=["rules"], action="append", default=[],
                     help="rules: every model also runs with its rules off (the transfer model always does)")
     ap.add_argument("--aim", choices=("gap", "rise"), default="gap",
@@ -181,10 +274,10 @@ def main(argv=None) -> None:
     ap.add_argument("--jar-objects", type=at_least(6), default=64, help="the experienced subjects' jar life")
     ap.add_argument("--workers", type=count, default=2, help="processes")
     ap.add_argument("--quick", action="store_true",
-                    help="a smoke test: 1 seed, 1 subject, the transfer model alone, 8 jar objects")
+                    help="a smoke test: 2 subjects, the transfer model alone, 8 jar objects")
     ap.add_argument("--out", type=Path, default=Path("/tmp/battery"), help="where the learning curves' PNG goes "
                                                                            "(without --record)")
-    record_flag(ap)
+    record_flag(ap, "BENCHMARKS.md: the bench's block and the battery section's table")
     a = ap.parse_args(argv)
     if a.record and (a.quick or a.trials != 20):
         ap.exit(2, "battery: --quick and --trials are for smoke tests, not recorded (drop --record)\n")
@@ -193,10 +286,11 @@ def main(argv=None) -> None:
     if bad:
         ap.exit(2, f"battery: --models {' '.join(bad)}: no such model (known: {', '.join(MODELS)})\n")
     if a.quick:
-        a.seeds, a.subjects, a.models, a.jar_objects = 1, 1, a.models[:1], 8
+        a.subjects, a.models, a.jar_objects = 2, a.models[:1], 8
     try:
         from sim.apparatus import load_task
-        tasks = {t: load_task(ROOT / "sim" / "tasks" / f"{t}.json") for t in a.tasks}
+        for t in a.tasks:
+            load_task(ROOT / "sim" / "tasks" / f"{t}.json")
     except (OSError, ValueError) as e:
         ap.exit(2, f"battery: {e}\n")
     png = PNG if a.record else a.out / "battery_curves.png"
@@ -204,87 +298,132 @@ def main(argv=None) -> None:
         png.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         ap.exit(2, f"battery: --out {a.out}: {e}\n")
-    from train.battery.tasks import agreement, analyse
+    from train.battery.tasks import agreement
+    from train.battery.analysis import mean_interval, paired_gain
     t0 = time.perf_counter()
-    seeds = list(range(a.first_seed, a.first_seed + a.seeds))
+    tasks = [t for t in ALL_TASKS if t in a.tasks]
+    seeds = [a.first_seed * 1000 + b for b in range(a.subjects)]
     conds = conditions(a.models, a.kinds, bool(a.ablate))
-    jobs = [(m, ab, k, s, a.subjects, list(tasks), a.aim, a.jar_objects, a.trials) for m, ab, k in conds
-            for s in seeds]
+    chunks = [c for c in (seeds[i::a.workers] for i in range(a.workers)) if c]
+    jobs = [(conds, c, tasks, a.aim, a.jar_objects, a.trials) for c in chunks]
     if a.workers > 1 and len(jobs) > 1:
         from train.learning.sim_pool import end_pool, quiet_pool   # workers ignore Ctrl-C, die with this process
-        pool = quiet_pool(min(a.workers, len(jobs)), None, what="a battery worker")
+        pool = quiet_pool(len(jobs), None, what="a battery worker")
         try:
-            done = dict(pool.imap_unordered(_job, jobs))
+            parts = pool.map(_job, jobs)
         finally:
             end_pool(pool)
     else:
-        done = dict(map(_job, jobs))
-    merged = {}
-    for m, ab, k in conds:
-        for t in tasks:
-            right = [r for s in seeds for r in done[(m, ab, k, s)][t]["right"]]
-            swapped = [x for s in seeds for x in done[(m, ab, k, s)][t]["swapped"]]
-            first = done[(m, ab, k, seeds[0])][t]
-            merged[(m, ab, k, t)] = dict(analyse(right, first["chance"]), right=right, swapped=swapped,
-                                         peeks=sum(done[(m, ab, k, s)][t]["peeks"] for s in seeds),
-                                         options=first["options"], correct=first["correct"])
-    n_subj = a.seeds * a.subjects
+        parts = list(map(_job, jobs))
+    done = {}
+    for part in parts:
+        for key, r in part.items():
+            if key not in done:
+                done[key] = r
+            else:
+                for k in ("right", "p_right", "functional", "drops", "reached", "choices", "swapped", "seeds",
+                          "pretrain_trials"):
+                    done[key][k] = done[key][k] + r[k]
+                done[key]["peeks"] += r["peeks"]
+    merged = analyse_all(done, conds, tasks)
+    n = a.subjects
     aim = "" if a.aim == "gap" else " (--aim rise: rise alone)"
-    print(f"Aesop battery: {a.seeds} seeds x {a.subjects} subjects = {n_subj} subjects per model and kind, "
-          f"{a.trials} trials each, a softmax over (predicted rise - the reward's gap){aim}, "
-          f"positions counterbalanced; experienced: a jar life of {a.jar_objects} objects first")
-    print("t1: % right on trial 1 [95 % Wilson]; slope: per trial, logit with an intercept per subject [95 %] (sep.: "
-          "perfect separation, exact p; n.e.: all alike); pass: subjects passing their own binomial test; "
-          "after R/W: % right after a right / after a wrong choice; spread: min-max of the subjects' share right")
-    for m, ab, k in conds:
-        print(f"\n{label(m, ab, k)}")
-        print(f"  {'task':<20}{'t1 %':>6}{'[95 %]':>12}  {'slope [95 %]':<26}{'pass':>6}{'after R/W':>11}"
-              f"{'spread':>11}  result")
+    print(f"Aesop battery: {n} independent subjects per condition (seeds {seeds[0]}-{seeds[-1]}, each its own maps, "
+          f"noise, positions and draws; conditions paired by seed), {a.trials} trials per task, a trial drops until "
+          f"the reward is in reach or the objects run out, a softmax over (predicted rise - the reward's gap){aim}; "
+          f"experienced: a jar life of {a.jar_objects} objects first")
+    print("t1: the subjects' mean expected P(correct) of the first drop of trial 1 [95 % t]; slope: per trial, "
+          "conditional logit [95 % likelihood-ratio]; holm p: one-sided, over the tasks; L: learned (the project's "
+          "rule: t1 not above chance, holm p < 0.05); pass: subjects passing their own binomial test (the project's "
+          "pass rule: more than half); func: share of functional drops; drops: per trial")
+    for c in conds:
+        r0 = merged[(*c, tasks[0])]
+        pre = [x for x in r0["pretrain"] if x is not None]
+        print(f"\n{label(*c)} (n = {n}; pre-training trials to criterion: median "
+              f"{sorted(pre)[len(pre) // 2] if pre else 'n/a'}, {n - len(pre)} did not reach it)")
+        print(f"  {'task':<28}{'t1 [95 %]':<20}{'slope [95 %]':<24}{'holm p':>8} {'L':<2}{'pass':>6}{'func':>6}"
+              f"{'drops':>6}")
         for t in tasks:
-            r = merged[(m, ab, k, t)]
-            t1 = r["trial1"]
-            af = r["after"]
-            ci = f"[{100 * t1['ci'][0]:.0f}, {100 * t1['ci'][1]:.0f}]"
-            after = f"{100 * af['after_right']:.0f}/{100 * af['after_wrong']:.0f}"
-            spread = f"{100 * r['spread']['min']:.0f}-{100 * r['spread']['max']:.0f}"
-            print(f"  {t:<20}{100 * t1['rate']:>6.0f}{ci:>12}  {slope_text(r['slope']):<26}"
-                  f"{r['subjects_passed']:>3}/{len(r['subjects']):<2}{after:>11}{spread:>11}  "
-                  f"{'passed' if r['passed'] else 'failed'}")
+            r = merged[(*c, t)]
+            print(f"  {t:<28}{interval(r['t1']):<20}{slope_text(r['cslope']):<24}{r.get('holm_p', math.nan):>8.2g} "
+                  f"{'L' if r.get('learned') else '-':<2}{r['subjects_passed']:>3}/{len(r['subjects']):<2}"
+                  f"{r['functional']['mean']:>6.2f}{r['drops']:>6.1f}")
+    peeks_total = sum(r["peeks"] for r in merged.values())
     swapped = [x for r in merged.values() for subject in r["swapped"] for x in subject]
     print(f"\npositions: the apparatus mirrored on {100 * sum(swapped) / len(swapped):.1f} % of {len(swapped)} trials; "
-          f"episodes with the test apparatus or a test object before trial 1: "
-          f"{sum(r['peeks'] for r in merged.values())}")
+          f"episodes with the test apparatus or a test object before trial 1: {peeks_total}")
     for t in tasks:
-        r = merged[(conds[0][0], (), conds[0][2], t)]
+        r = merged[(*conds[0], t)]
         print(f"  {t}: options {', '.join(r['options'])}; correct {[r['options'][i] for i in r['correct']]}")
-    print("\npublished (crows | rooks | jays | children):")
+
+    M = a.models[0]
+    have = lambda ab, k: all((M, ab, k, t) in merged for t in tasks)
+    conflict = [t for t in CONFLICT if t in tasks]
+
+    def gain(ab, ts):
+        if not ts or not (have(ab, "experienced") and have((), "naive")):
+            return None
+        return paired_gain(per_subject_trial1(merged, (M, ab, "experienced"), ts),
+                           per_subject_trial1(merged, (M, (), "naive"), ts))
+
+    def t1(ab, k, ts):
+        if not ts or not have(ab, k):
+            return None
+        return mean_interval(list(per_subject_trial1(merged, (M, ab, k), ts).values()))
+    print(f"\ntransfer ({M}): experienced - naive expected P(correct) on trial 1, paired by subject [95 % t], n, "
+          f"Wilcoxon p; rules off: experienced with the rules off - naive")
     for t in tasks:
+        cells = []
+        for ab in ((), ("rules",)):
+            g = gain(ab, [t])
+            if g is not None:
+                cells.append(f"{'rules off ' if ab else ''}{interval(g)} n={g['n']} p={g['p']:.2g}")
+        print(f"  {t:<28}" + "; ".join(cells))
+    g_on, g_off = gain((), conflict), gain(("rules",), conflict)
+    for name, g in (("conflict tasks, rules on", g_on), ("conflict tasks, rules off", g_off)):
+        if g is not None:
+            print(f"  {name}: {interval(g)} n={g['n']} p={g['p']:.2g}")
+
+    kind = "experienced" if "experienced" in a.kinds else "naive"
+    study = [t for t in TASKS if t in tasks]
+    agree, both = agreement({t: merged[(M, (), kind, t)]["passed"] for t in study}, CROWS)
+    every, _ = agreement({t: True for t in study}, CROWS)
+    print(f"\nthe crows' pattern (Jelbert et al. 2014; {label(M, (), kind)} subjects by the project's pass rule): "
+          f"agreement {agree}/{both}; a model that passes everything: {every}/{both}")
+    for t in study:
+        if CROWS.get(t) == "failed" and merged[(M, (), kind, t)]["passed"]:
+            r = merged[(M, (), kind, t)]
+            print(f"  {t}: the crows failed, the model passes (t1 {interval(r['t1'])}, "
+                  f"func {r['functional']['mean']:.2f}): every drop's outcome is seen (the reward rises in one tube and not the other) and stored with "
+                  f"the tube's width, level and place, each on a map of its own, so recall tells the tubes apart "
+                  f"from the first trial's drops; the crows did not learn these in their trials")
+    print("\npublished (crows | rooks | jays | children):")
+    for t in study:
         print(f"  {t}: " + " | ".join(PUBLISHED[t]))
-    curves = {t: {label(m, ab, k): (merged[(m, ab, k, t)]["right"], merged[(m, ab, k, t)]["chance"])
-                  for m, ab, k in conds} for t in tasks}
-    curves_png(curves, list(tasks), png)
+    for note in NOTES:
+        print(f"  note: {note}")
+    curves = {t: {label(*c): (merged[(*c, t)]["p_right"], merged[(*c, t)]["chance"]) for c in conds}
+              for t in tasks}
+    curves_png(curves, tasks, png)
     import resource
     cpu = sum(getattr(resource.getrusage(w), f) for w in (resource.RUSAGE_SELF, resource.RUSAGE_CHILDREN)
               for f in ("ru_utime", "ru_stime"))
-    print(f"learning curves: {png.relative_to(ROOT) if png == PNG else png}; {time.perf_counter() - t0:.0f} s "
-          f"({cpu:.0f} s of CPU over all processes)")
+    print(f"learning curves: {png.relative_to(ROOT) if png == PNG else png}; {time.perf_counter() - t0:.0f} s wall "
+          f"({cpu:.0f} s of CPU over all processes, {a.workers} workers)")
 
-    M = a.models[0]
-
-    def transfer(model, ablate):
-        keys = [(model, ablate, "experienced", t) for t in OBJECT_TASKS if (model, ablate, "experienced", t) in merged]
-        if not keys:
-            return "n/a"
-        k = sum(merged[x]["trial1"]["k"] for x in keys)
-        n = sum(merged[x]["trial1"]["n"] for x in keys)
-        return f"{k / n:.2f}"
-    learned = (f"{sum(merged[(M, (), 'naive', t)]['slope']['learned'] for t in tasks)}/{len(tasks)}"
-               if "naive" in a.kinds else "n/a")
-    kind = "experienced" if "experienced" in a.kinds else "naive"
-    agree, both = agreement({t: merged[(M, (), kind, t)]["passed"] for t in tasks}, CROWS)
-    print(f"transfer_trial1_{M}={transfer(M, ())} transfer_trial1_{M}_rules_off={transfer(M, ('rules',))} "
-          f"transfer_trial1_paper={transfer('paper', ())} learned_tasks_naive_{M}={learned} "
-          f"crows_agreement={agree}/{both}")
+    fmt = lambda g: "n/a [n/a, n/a]" if g is None else interval(g)
+    val = lambda iv: "n/a" if iv is None else f"{iv['mean']:.2f}"
+    learned = (f"{sum(bool(merged[(M, (), 'naive', t)].get('learned')) for t in study)}/{len(study)}"
+               if have((), "naive") else "n/a")
+    last = (f"transfer_gain_{M}={fmt(g_on)} transfer_gain_{M}_rules_off={fmt(g_off)} "
+            f"conflict_trial1_experienced={val(t1((), 'experienced', conflict))} "
+            f"conflict_trial1_experienced_rules_off={val(t1(('rules',), 'experienced', conflict))} "
+            f"conflict_trial1_naive={val(t1((), 'naive', conflict))} learned_tasks_naive_{M}={learned} "
+            f"crows_agreement={agree}/{both} pass_everything_agreement={every}/{both} subjects={n}")
+    if a.record:
+        write_table_block(table_block(merged, conds, tasks, last, n, "python " + " ".join(
+            ["benches/battery.py", *sys.argv[1:]])))
+    print(last)
 
 
 if __name__ == "__main__":

@@ -77,6 +77,15 @@ class TaskObject(ObjectSpec):
         t = self.wall_cm or 0.0
         return math.pi / 4.0 * (d * d * h - (d - 2 * t) ** 2 * (h - t))
 
+    @property
+    def fill(self) -> float:
+        """Volume / bounding box as the eye sees it. A cup's cavity is open to a camera above it (its depth shows
+        the floor inside), so what is seen filled is the walls: walls_cm3 over the box; a solid's is its shape's."""
+        if not self.hollow:
+            return super().fill
+        d, h = self.dims_cm
+        return self.walls_cm3 / (d * d * h)
+
 
 @dataclass(frozen=True)
 class Task:

@@ -167,3 +167,44 @@ def test_perceive_tube_reads_width_level_and_substrate_from_the_camera(name):
         assert s["level_cm"] == pytest.approx(tube.level_cm, abs=LEVEL_TOL_CM), tube.name
         want = water_rgb if tube.substrate == "water" else SUBSTRATE_RGB[tube.substrate]
         assert s["substrate_rgb"] == pytest.approx(list(want), abs=RGB_TOL), tube.name
+
+
+def test_a_trials_drops_in_one_world_against_the_closed_form():
+    """The battery's trial (train.battery.tasks.play): drops one after another into one simulated tube, the water carried
+    over, from the trial's start (2 stones' rise below the file's level). Stones alone stack on the bottom (the
+    third one's top 15 cm up, under the water) and each rises as the closed form's chain (+1.80 cm each). The
+    difference, stated (BENCHMARKS.md, "The Aesop battery"): a stone dropped onto a floater in this 5 cm tube cannot pass
+    it and holds it under water, so the floater then displaces its whole 35.3 cm^3 (+1.80 cm) where the closed form
+    keeps its 12 cm^3 (+0.61 cm): after the floater and a stone the physics is 3.60 cm up, the closed form 2.41."""
+    import pybullet as p
+    from dataclasses import replace as dc_replace
+
+    from sim.tubes import Apparatus
+    from train.battery.tasks import Protocol, trial_levels
+    t = task("sinking_vs_floating")
+    start = trial_levels(t, Protocol())
+    t0 = dc_replace(t, tubes=tuple(dc_replace(x, level_cm=start[x.name]) for x in t.tubes))
+    objs = {o.name: o for o in t.objects}
+
+    def run(names):
+        cl = p.connect(p.DIRECT)
+        try:
+            ap = Apparatus(cl, t0)
+            sim_start = ap.levels_cm()["tube"]
+            assert sim_start == pytest.approx(start["tube"], abs=PHYSICS_TOL_CM)
+            levels, got, want = dict(start), [], []
+            for name in names:
+                o = outcome(t, levels, t.tube("tube"), objs[name])
+                out = ap.drop("tube", objs[name])
+                assert out["settled"], name
+                got.append(out["levels"]["tube"] - sim_start)
+                want.append(o["levels"]["tube"] - start["tube"])
+                levels = o["levels"]
+            return got, want, o["reached"]
+        finally:
+            p.disconnect(cl)
+    got, want, reached = run(["stone", "stone", "stone"])
+    assert got == pytest.approx(want, abs=PHYSICS_TOL_CM) and want == pytest.approx([1.8, 3.6, 5.4]) and reached
+    got, want, _ = run(["float", "stone"])
+    assert want == pytest.approx([12 / (math.pi / 4 * 25), 12 / (math.pi / 4 * 25) + 1.8], abs=1e-3)
+    assert got == pytest.approx([want[0], 3.6], abs=PHYSICS_TOL_CM)

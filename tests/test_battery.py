@@ -8,7 +8,6 @@ import random
 import re
 import subprocess
 import sys
-from dataclasses import replace
 from pathlib import Path
 
 import pytest
@@ -19,12 +18,12 @@ from aesop_torch.agent import Agent
 from aesop_torch.encoders import (MAP_NAMES, EncoderConfig, SensoryEncoder, default_map_configs,
                                   developmental_samples)
 from sim.apparatus import load_task
-from train.battery.tasks import (CONTEXT, REWARD_SCALE, Protocol, Subjects, balanced_swaps, binomial_tail, context_agent,
-                           make_config, make_subjects, play, run_task, score, softmax_choice, task_world)
+from train.battery.tasks import (Protocol, balanced_swaps, binomial_tail, make_config, make_subjects, play, run_task, score,
+                           softmax_choice, task_world)
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ROOT / "sim" / "tasks"
-SMALL = Protocol(jar_objects=6, pretrain_repeats=1)
+SMALL = Protocol(jar_objects=6, criterion=1, max_pretrain_trials=4)
 
 
 def test_binomial_tail_known_values():
@@ -72,14 +71,24 @@ def test_no_subject_meets_the_test_apparatus_or_a_test_object_before_trial_1(mon
         return real_step(self, measurement, *a, **k)
 
     def play_(*a, **k):
-        phase[0] = "trial"
+        if k.get("phase", "trial") == "trial":
+            phase[0] = "trial"
         return real_play(*a, **k)
     monkeypatch.setattr(Agent, "step", step)
     monkeypatch.setattr(battery, "play", play_)
     r = run_task(task, "paper", [1], 2, trials=2, kind=kind, protocol=SMALL)
-    assert len(before) == 3 + (6 if kind == "experienced" else 0)   # 3 stones once (and a jar life of 6 objects)
+    jar = 6 if kind == "experienced" else 0
+    # a jar life of 6 objects, then the pre-training: at least `criterion` trials of drops_to_reach drops each
+    assert len(before) >= jar + SMALL.criterion * SMALL.drops_to_reach
+    for subject in r["log"]:
+        phases = [p for p, _, _ in subject]
+        assert phases[:jar] == ["jar"] * jar
+        assert phases.count("pretraining") >= SMALL.criterion * SMALL.drops_to_reach
     test_objects = [torch.tensor(o["rgb"] + o["extent_cm"] + [o["mass_g"]]) for o in options[0]]
-    test_tubes = [torch.tensor([o["context"][k] for k in ("surface", "width", "level")]) for o in options[0]]
+    levels = battery.trial_levels(task, SMALL)
+    test_tubes = [torch.tensor([battery.perceive_option(task, t, {}, lv)["context"][k]
+                                for k in ("surface", "width", "level")])
+                  for t in task.tubes for lv in (levels, task.start_levels())]
     for m in before:
         for b in range(2):
             obj = torch.cat([m["rgb"][b], m["extent_cm"][b], m["mass_g"][b:b + 1]])
@@ -89,7 +98,8 @@ def test_no_subject_meets_the_test_apparatus_or_a_test_object_before_trial_1(mon
     # the log says the same: before the trials, only the jar and the pre-training tube
     assert all(where in ("jar", "pretraining") for subject in r["log"] for phase_, where, _ in subject
                if phase_ != "trial")
-    assert [sum(p == "trial" for p, _, _ in subject) for subject in r["log"]] == [2, 2]
+    assert [sum(p == "trial" for p, _, _ in subject) for subject in r["log"]] == [sum(d) for d in r["drops"]]
+    assert [len(d) for d in r["drops"]] == [2, 2]
 
 
 def test_positions_are_counterbalanced():
@@ -124,54 +134,122 @@ def test_softmax_choice_draws_by_the_values():
     assert sum(draws) / 4000 == pytest.approx(0.5, abs=0.03)
 
 
-def _small(model):
-    c = make_config(model, seed=1)
-    return replace(c, som_samples=800, som_epochs=5)
+def test_a_trial_is_drops_with_the_water_carried_over():
+    """sinking vs floating: the trial starts 2 functional drops below the file's level (the stone raises 35.34 /
+    19.63 = 1.80 cm: 15.5 - 3.60 = 11.90 cm); every drop is asked of the world from the levels the last one left;
+    a subject that drops the stone three times reaches, and the trial ends there."""
+    task = load_task(TASKS / "sinking_vs_floating.json")
+    rise = math.pi / 4 * 9 * 5 / (math.pi / 4 * 25)
+    assert battery.trial_levels(task, Protocol())["tube"] == pytest.approx(15.5 - 2 * rise)
+    from sim.apparatus import outcome
+    asked = []
+
+    def world(task_, levels, tube, obj):
+        asked.append((dict(levels), obj.name))
+        return outcome(task_, levels, tube, obj)
+    subjects = make_subjects("paper", "naive", 1, 1, protocol=SMALL)     # one subject: the world's calls in order
+    r = play(subjects, task, trials=3, protocol=SMALL, outcome=world)
+    for (lv, name), (nxt, _) in zip(asked, asked[1:]):
+        if nxt["tube"] != battery.trial_levels(task, SMALL)["tube"]:      # not a new trial's first drop
+            assert nxt["tube"] == pytest.approx(lv["tube"] + (rise if name == "stone" else 12 / (math.pi / 4 * 25)))
+    assert len(asked) == sum(r["drops"][0])
+    for b in range(1):
+        for choices, reached, drops in zip(r["choices"][b], r["reached"][b], r["drops"][b]):
+            assert drops == len(choices) and reached == (choices.count("tube:stone") == 3)
+            assert 1 <= drops <= 2 * SMALL.objects_each
 
 
-def _subjects(model, options, world, first):
-    """Two subjects that each tried both options once in each layout (subject b option first[b] first)."""
-    agent = context_agent(_small(model), 2)
-    no = torch.zeros(2, dtype=torch.bool)
-    for layout in (0, 1):
-        for step in range(2):
-            chosen = [first[b] if step == 0 else 1 - first[b] for b in range(2)]
-            outs = [world(i) for i in chosen]
-            agent.step(battery.stack([options[layout][i] for i in chosen]),
-                       torch.tensor([REWARD_SCALE * r for r, _ in outs]), no, torch.tensor([x for _, x in outs]))
-    return Subjects(agent, [11, 12], "naive", [[], []])
+def test_no_task_is_reached_with_its_wrong_objects_alone():
+    """Every task of sim/tasks (but crows.json, the goal trials' file): from the trial's start the functional option
+    reaches in exactly drops_to_reach drops, and objects_each drops of any one wrong option never reach."""
+    from sim.apparatus import outcome
+    p = Protocol()
+    for f in sorted(TASKS.glob("*.json")):
+        if f.stem == "crows":
+            continue
+        task = load_task(f)
+        for tube, obj in task.options():
+            levels = battery.trial_levels(task, p)
+            good = (tube.name, obj.name) in set(task.correct)
+            for d in range(1, p.objects_each + 1):
+                o = outcome(task, levels, tube, obj)
+                levels = o["levels"]
+                if good:
+                    assert o["reached"] == (d >= p.drops_to_reach), (f.stem, d)
+                else:
+                    assert not o["reached"], (f.stem, tube.name, obj.name, d)
 
 
-@pytest.mark.parametrize("model", ["paper", "extended"])
-def test_two_options_one_episode_each_chooses_the_better(model):
-    """Same object, two tubes differing only in their contents' look: option 0 raises the reward 2 cm (in reach),
-    option 1 not at all, each tried in both layouts. At a low temperature every choice is option 0, in either
-    layout."""
-    obj = {"rgb": [0.8, 0.1, 0.1], "extent_cm": [4.0, 4.0, 4.0], "fill": 1.0, "mass_g": 150.0}
-    ctx = lambda s, place: {"surface": s, "width": 0.3, "level": 0.5, "place": place}
-    options = [[dict(obj, context=ctx(0.15, 0.0)), dict(obj, context=ctx(0.6, 1.0))],
-               [dict(obj, context=ctx(0.15, 1.0)), dict(obj, context=ctx(0.6, 0.0))]]
-    world = lambda i: (2.0, True) if i == 0 else (0.0, False)
-    subjects = _subjects(model, options, world, [0, 1])
-    assert tuple(subjects.agent.maps)[-len(CONTEXT):] == CONTEXT
-    r = play(subjects, "t", options, world, {0}, trials=4, protocol=Protocol(temperature=0.01))
-    assert r["choices"] == [[0] * 4, [0] * 4] and r["right"] == [[True] * 4] * 2
-    assert [sum(s) for s in r["swapped"]] == [2, 2]
+def test_test_objects_are_perceived_with_the_sensor_noise_and_the_cup_as_hollow():
+    """Each drop sees the objects anew through sim.sensor_model (its sd): two looks at the stone differ, within
+    5 sd of the truth; the cup's fill is its walls over its box (9.90 / 45 cm^3 = 0.220), the solid's pi / 4."""
+    from sim.sensor_model import SensorModel
+    task = load_task(TASKS / "solid_vs_hollow.json")
+    cup = next(o for o in task.objects if o.hollow)
+    walls = math.pi / 4 * (9 * 5 - 2.6 ** 2 * 4.8)
+    assert cup.fill == pytest.approx(walls / 45.0) and cup.fill == pytest.approx(0.2199, abs=1e-3)
+    assert next(o for o in task.objects if not o.hollow).fill == pytest.approx(math.pi / 4)
+    seen = []
+
+    def look(task_, tube, obj_seen, levels):
+        seen.append(obj_seen)
+        return battery.perceive_option(task_, tube, obj_seen, levels)
+    play(make_subjects("paper", "naive", 1, 1, protocol=SMALL), task, trials=2, protocol=SMALL, look=look)
+    fills = [m["fill"] for m in seen if m["mass_g"] < 60]
+    masses = [m["mass_g"] for m in seen if m["mass_g"] > 60]
+    sd = SensorModel()
+    assert len(set(masses)) == len(masses) > 1
+    assert all(abs(x - 100.0) < 5 * sd.mass_sd_g for x in masses)
+    assert all(abs(x - cup.fill) < 5 * sd.fill_sd + 0.01 for x in fills)
+
+
+def test_the_expected_p_correct_is_the_softmax_of_the_values():
+    assert battery.softmax_probs([0.0, 3.0 * math.log(3)], 3.0) == pytest.approx([0.25, 0.75])
+    # the NaN is valued as the mean of the known values (1): weights e, 1, e^2
+    z = 1 + math.e + math.e ** 2
+    assert battery.softmax_probs([float("nan"), 0.0, 2.0], 1.0) == pytest.approx([math.e / z, 1 / z, math.e ** 2 / z])
+    assert battery.softmax_probs([float("nan")] * 2, 1.0) == pytest.approx([0.5, 0.5])
 
 
 def test_a_choice_aims_at_the_rewards_gap():
-    """Two tubes alike but for their level: each option raises its own reward 1.8 cm; only the high tube's (seen
-    1.5 cm below reach, the low one's 5 cm) comes in reach. The predicted rises tie, so the values differ by the
-    gaps (3.5 cm = 350 units): aiming at the gap chooses the high tube on every trial at any sane temperature."""
-    obj = {"rgb": [0.5, 0.5, 0.5], "extent_cm": [3.0, 3.0, 5.0], "fill": 0.785, "mass_g": 100.0}
-    ctx = lambda level, place: {"surface": 0.15, "width": 0.3, "level": level, "place": place}
-    options = [[dict(obj, context=ctx(0.775, 0.0), gap_cm=1.5), dict(obj, context=ctx(0.6, 1.0), gap_cm=5.0)],
-               [dict(obj, context=ctx(0.775, 1.0), gap_cm=1.5), dict(obj, context=ctx(0.6, 0.0), gap_cm=5.0)]]
-    world = lambda i: (1.8, i == 0)
-    r = play(_subjects("paper", options, world, [0, 1]), "t", options, world, {0}, trials=4)
-    assert r["choices"] == [[0] * 4, [0] * 4]
+    """high vs low water: two tubes alike but for their level, one stone. The predicted rises of a subject that
+    knows neither tube tie closely; the values differ by the gaps (3.5 cm = 350 units at a temperature of 3): the
+    high tube is chosen with P > 0.99 on every first drop. aim must be one of AIMS."""
+    task = load_task(TASKS / "high_vs_low_water.json")
+    r = play(make_subjects("paper", "naive", 1, 2, protocol=SMALL), task, trials=3, protocol=SMALL)
+    assert all(p > 0.99 for subject in r["p_right"] for p in subject)
     with pytest.raises(ValueError, match="aim"):
-        play(_subjects("paper", options, world, [0, 1]), "t", options, world, {0}, trials=1, aim="nearest")
+        play(make_subjects("paper", "naive", 1, 1, protocol=SMALL), task, trials=1, aim="nearest")
+
+
+def test_subjects_are_independent_with_maps_of_their_own():
+    """Two subjects' maps come from their own seeds (they differ); a batch of one subject of seed s perceives,
+    recalls and predicts as a plain Agent of seed s, bit for bit."""
+    from aesop_torch.agent import Agent
+    from train.battery.subject_maps import OwnMapsAgent
+    c = make_config("contextual", seed=7, extra=0)
+    two = OwnMapsAgent.of_seeds(c, [7, 8])
+    assert not torch.equal(two.map_sets[0]["weight"].weights, two.map_sets[1]["weight"].weights)
+    one, ref = OwnMapsAgent.of_seeds(c, [7]), Agent(c, batch=1)
+    no = torch.zeros(1, dtype=torch.bool)
+    life = battery.jar_world(7, 8)
+    for e in life:
+        for ag in (one, ref):
+            ag.step(battery.stack([e[0]]), torch.tensor([e[1]]), no, torch.tensor([e[2]]), sank=torch.tensor([e[3]]))
+    m = battery.stack([life[0][0], life[3][0]])
+    assert torch.equal(one.select([0, 0]).predict(m), ref.select([0, 0]).predict(m))
+    assert torch.equal(one.memory.patterns, ref.memory.patterns)
+
+
+def test_pretraining_runs_to_its_criterion():
+    """Each subject's pre-training trials: it stops at the first run of `criterion` trials solved with the fewest
+    drops (drops_to_reach, every drop the largest stone); the log holds its drops."""
+    s = make_subjects("paper", "naive", 3, 2, protocol=SMALL)
+    for b, n in enumerate(s.pretrain_trials):
+        assert n is not None and SMALL.criterion <= n <= SMALL.max_pretrain_trials
+        drops = [w for p, _, w in s.log[b] if p == "pretraining"]
+        assert drops[-SMALL.drops_to_reach * SMALL.criterion:] == ["pebble_large"] * (SMALL.drops_to_reach
+                                                                                      * SMALL.criterion)
 
 
 def test_an_experienced_subject_has_lived_its_jar_life():
@@ -179,8 +257,9 @@ def test_an_experienced_subject_has_lived_its_jar_life():
     the pre-training; a naive subject has the pre-training alone."""
     e = make_subjects("paper", "experienced", 1, 2, protocol=SMALL)
     n = make_subjects("paper", "naive", 1, 2, protocol=SMALL)
-    assert [p for p, _, _ in e.log[0]] == ["jar"] * 6 + ["pretraining"] * 3
-    assert [p for p, _, _ in n.log[0]] == ["pretraining"] * 3
+    assert [p for p, _, _ in e.log[0]][:6] == ["jar"] * 6
+    assert set(p for p, _, _ in e.log[0][6:]) == {"pretraining"}
+    assert set(p for p, _, _ in n.log[0]) == {"pretraining"}
     assert e.log[0][:6] != e.log[1][:6]                     # each subject its own jar life
     assert int(e.agent.memory.count.min()) > int(n.agent.memory.count.max())
     with pytest.raises(ValueError, match="kind"):
@@ -193,7 +272,7 @@ def test_bench_help():
     assert r.returncode == 0 and "--ablate" in r.stdout and "--record" in r.stdout and "--models" in r.stdout
 
 
-def bench_model() -> str:
+def bench_module():
     import importlib.util
     spec = importlib.util.spec_from_file_location("battery_bench", ROOT / "benches" / "battery.py")
     sys.path.insert(0, str(ROOT / "benches"))
@@ -202,22 +281,44 @@ def bench_model() -> str:
         spec.loader.exec_module(module)
     finally:
         sys.path.remove(str(ROOT / "benches"))
-    return module.MODEL
+    return module
 
 
-@pytest.mark.timeout(200)
+def bench_model() -> str:
+    return bench_module().MODEL
+
+
+def test_record_rewrites_the_battery_table_and_nothing_else(tmp_path):
+    bench = bench_module()
+    f = tmp_path / "BENCHMARKS.md"
+    f.write_text("a\n<!-- table:battery -->\nold table\n<!-- /table:battery -->\nb\n<!-- bench:battery -->\nraw\n")
+    bench.write_table_block("new table\n", f)
+    assert f.read_text() == ("a\n<!-- table:battery -->\nnew table\n<!-- /table:battery -->\nb\n"
+                             "<!-- bench:battery -->\nraw\n")   # the raw block is record.py's, left as it is
+    g = tmp_path / "OTHER.md"
+    g.write_text("no block\n")
+    with pytest.raises(ValueError, match="table:battery"):
+        bench.write_table_block("x", g)
+    assert g.read_text() == "no block\n"
+    assert "<!-- table:battery -->" in (ROOT / "BENCHMARKS.md").read_text()
+
+
+@pytest.mark.timeout(300)
 def test_bench_last_line_on_a_tiny_run(tmp_path):
-    """1 seed, 1 subject, 3 trials, one task: ~9 s of CPU (8.2 s user measured)."""
+    """2 subjects, 2 trials, one task and one conflict task, the transfer model with its rules on and off: ~20 s of
+    CPU (--quick's 8 jar objects)."""
     r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--quick", "--tasks",
-                        "sinking_vs_floating", "--trials", "3", "--workers", "1", "--out", str(tmp_path)],
-                       capture_output=True, text=True, cwd=ROOT, timeout=180)
+                        "sinking_vs_floating", "large_light_vs_small_heavy", "--trials", "2", "--workers", "1",
+                        "--out", str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=280)
     assert r.returncode == 0, r.stderr
     last = r.stdout.splitlines()[-1]
+    g = r"-?\d\.\d\d"
     rate = r"(0\.\d\d|1\.00)"
     m = bench_model()   # the transfer model, one constant in the bench
-    assert re.fullmatch(rf"transfer_trial1_{m}={rate} transfer_trial1_{m}_rules_off={rate} "
-                        rf"transfer_trial1_paper=n/a learned_tasks_naive_{m}=[01]/1 crows_agreement=[01]/1",
-                        last), last
+    assert re.fullmatch(rf"transfer_gain_{m}={g} \[{g}, {g}\] transfer_gain_{m}_rules_off={g} \[{g}, {g}\] "
+                        rf"conflict_trial1_experienced={rate} conflict_trial1_experienced_rules_off={rate} "
+                        rf"conflict_trial1_naive={rate} learned_tasks_naive_{m}=[01]/1 crows_agreement=[01]/1 "
+                        rf"pass_everything_agreement=1/1 subjects=2", last), last
     assert (tmp_path / "battery_curves.png").stat().st_size > 0
     assert "before trial 1: 0" in r.stdout
 

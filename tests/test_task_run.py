@@ -34,11 +34,12 @@ def test_the_simulated_options_rise_as_the_closed_form_and_the_camera_reads_the_
         # a sinker in water: V / area (e.g. 35.3 cm^3 in a 5 cm tube, +1.80 cm); on sand: nothing
         assert got["reward_rise_cm"] == pytest.approx(want["reward_rise_cm"], abs=0.01), (tube.name, obj.name)
         assert got["reached"] == want["reached"], (tube.name, obj.name)
-        ctx = world.measurement(task, tube, obj)["context"]
+        ctx = world.measurement(task, tube, obj.exact_measurement(), start)["context"]
         width = math.exp(math.log(lo) + ctx["width"] * (math.log(hi) - math.log(lo)))
         assert width == pytest.approx(tube.inner_diameter_cm, abs=0.15), tube.name   # read 1-1.5 % narrow
         assert ctx["level"] * tube.height_cm == pytest.approx(tube.level_cm, abs=0.02), tube.name
-    looks = {t.substrate: world.measurement(task, t, task.objects[0])["context"]["surface"] for t in task.tubes}
+    looks = {t.substrate: world.measurement(task, t, task.objects[0].exact_measurement(), start)["context"]["surface"]
+             for t in task.tubes}
     assert len(set(round(v, 2) for v in looks.values())) == len(looks)   # each substrate looks different
 
 

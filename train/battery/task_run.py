@@ -1,13 +1,15 @@
 """One task of the Aesop battery with physics: `train/run.py --objects sim/tasks/<task>.json`.
 
 The task's tubes are built in pybullet (sim/tubes.py) and seen from the camera (sim.perception.perceive_tube): each
-tube's width, level and the look of what fills it become the agent's context properties, as train/battery/tasks.py's
-agents have them, but measured from images instead of read from the file. Every (tube, object) option, and every
-exploration drop, is simulated from the task's starting levels (each trial is set up afresh, as in the studies), and
-its reward tube's rise is measured from the simulation. pybullet is deterministic, so each distinct drop is simulated
-once and its measured outcome replayed on every trial that repeats it. Then `--orders` naive subjects of `--seed`,
-pre-trained on stones in a jar-like tube (the closed form's: the pre-training is no part of the task), meet the task
-on trial 1 and play its 20 trials, its tubes mirrored on half of them (train.battery.tasks.run_task).
+tube's width and the look of what fills it become the agent's context properties, as train/battery/tasks.py's agents
+have them, but measured from images instead of read from the file. A trial is drops with the water carried over
+(train.battery.tasks.play): every drop is simulated from the levels it meets, in a world whose tubes stand at those
+levels (the trial's earlier objects are not in it, their water is: a stone that would land on an earlier floater
+and hold it under is not simulated so; tests/test_apparatus.py measures that difference), and its reward tube's
+rise is measured. pybullet is deterministic, so each distinct (levels, tube, object) is simulated once and replayed.
+Then `--orders` naive subjects of `--seed`, pre-trained to the criterion on stones in a jar-like tube (the closed
+form's: the pre-training is no part of the task), meet the task on trial 1 and play its 20 trials, its tubes
+mirrored on half of them (train.battery.tasks.run_task).
 
 Writes into --out: summary.json (the perceived tubes, each option's simulated and closed-form rise, every agent's
 choices, the scores), tb/ (per trial: the share of agents choosing right, the mean rise they got) and, with
@@ -71,48 +73,55 @@ class PhysicsWorld:
         finally:
             p.disconnect(cl)
 
-    def measurement(self, task, tube, obj) -> dict:
-        """An option as the agent perceives it: the object's measurement and the tube's context from the camera."""
-        from train.battery.tasks import WIDTH_RANGE_CM
-        from train.battery.tasks import reward_gap_cm
-        m = dict(obj.exact_measurement())
-        m["gap_cm"] = reward_gap_cm(task, tube, {k: v["level_cm"] for k, v in self.seen.items()})
+    def measurement(self, task, tube, seen: dict, levels: dict) -> dict:
+        """An option as the agent perceives it (train.battery.tasks.play's `look`): the object as seen, the tube's width
+        and look from the camera, its level now, its place, and the gap of the reward it raises."""
+        from train.battery.tasks import WIDTH_RANGE_CM, reward_gap_cm
+        m = dict(seen)
+        m["gap_cm"] = reward_gap_cm(task, tube, levels)
         s = self.seen[tube.name]
         lo, hi = WIDTH_RANGE_CM
         d = min(max(s["width_cm"], lo), hi)
         names = [t.name for t in task.tubes]   # the task as laid out on this trial (train.battery.tasks.mirrored)
         m["context"] = {"surface": look(s["substrate_rgb"]),
                         "width": (math.log(d) - math.log(lo)) / (math.log(hi) - math.log(lo)),
-                        "level": min(max(s["level_cm"] / tube.height_cm, 0.0), 1.0),   # the rim is the workspace's
+                        "level": min(max(levels[tube.name] / tube.height_cm, 0.0), 1.0),   # the rim is the workspace's
                         "place": names.index(tube.name) / max(len(names) - 1, 1)}
         return m
 
     def outcome(self, task, levels, tube, obj) -> dict:
-        """sim.apparatus.outcome's contract, measured: one drop from the starting levels in a fresh world."""
-        key = (tube.name, obj.name)
+        """sim.apparatus.outcome's contract, measured: one drop from `levels` in a fresh world whose tubes stand
+        at those levels (a trial's earlier drops are not in it: their water is, their bodies are not)."""
+        key = (tuple(sorted((k, round(float(v), 4)) for k, v in levels.items())), tube.name, obj.name)
         if key not in self._drops:
-            self._drops[key] = self._simulate(tube, obj)
+            self._drops[key] = self._simulate(dict(levels), tube, obj)
         return self._drops[key]
 
-    def _simulate(self, tube, obj) -> dict:
+    def _simulate(self, levels, tube, obj) -> dict:
         import pybullet as p
+        from dataclasses import replace
 
         from sim.tubes import Apparatus
+        task = replace(self.task, tubes=tuple(replace(t, level_cm=levels.get(t.name, t.level_cm))
+                                              for t in self.task.tubes))
         cl = p.connect(p.DIRECT)
         try:
-            ap = Apparatus(cl, self.task)
+            ap = Apparatus(cl, task)
             start = ap.levels_cm()
             out = ap.drop(tube.name, obj)
-            if self.frames is not None:
+            if self.frames is not None and levels == self.task.start_levels():
                 self._save(self._side_view(cl, ap), f"drop_{tube.name}_{obj.name}.png")
         finally:
             p.disconnect(cl)
-        levels = {k: float(v) for k, v in out["levels"].items()}
+        # the measured rise on top of the levels asked for (the simulated start reads them to ~0.01 cm)
+        new = {k: float(levels[k]) + float(v) - float(start[k]) for k, v in out["levels"].items()}
         rewards = [t for t in self.task.tubes if t.reward]
-        rises = {k: levels[k] - float(start[k]) for k in levels}
-        return {"levels": levels, "rise_cm": rises, "settled": bool(out["settled"]),
+        rises = {k: new[k] - float(levels[k]) for k in new}
+        floats = tube.substrate == "water" and not getattr(obj, "hollow", False) and \
+            obj.mass_g < obj.volume_cm3
+        return {"levels": new, "rise_cm": rises, "settled": bool(out["settled"]),
                 "reward_rise_cm": max((rises[t.name] for t in rewards), default=0.0),
-                "reached": any(levels[t.name] >= t.height_cm - self.task.reach_cm for t in rewards)}
+                "reached": any(new[t.name] >= t.height_cm - self.task.reach_cm for t in rewards), "sank": not floats}
 
     # -- frames ------------------------------------------------------------------------------------------------
     def _side_view(self, cl, ap):
@@ -151,10 +160,11 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
     for name, s in world.seen.items():
         log(f"  seen {name}: {s['width_cm']:.2f} cm wide, level {s['level_cm']:.2f} cm, look "
             f"{look(s['substrate_rgb']):.2f}")
-    result = run_task(task, model, [seed], orders, tuple(ablate), outcome=world.outcome, perceive=world.measurement)
+    result = run_task(task, model, [seed], orders, tuple(ablate), outcome=world.outcome, look=world.measurement)
     start = task.start_levels()
     options = []
     for i, (tube, obj) in enumerate(task.options()):
+        # from the file's levels
         sim_out, closed = world.outcome(task, start, tube, obj), outcome(task, dict(start), tube, obj)
         options.append({"option": f"{tube.name}:{obj.name}", "correct": i in result["correct"],
                         "simulated_rise_cm": round(sim_out["reward_rise_cm"], 4),
@@ -168,7 +178,7 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
               for k, s in result["scores"].items()}
     summary = {"task": task.name, "model": model, "ablate": list(ablate), "seed": seed, "agents": orders,
                "chance": result["chance"], "perceived": world.seen, "options": options,
-               "choices": [[result["options"][i] for i in c] for c in result["choices"]], "scores": scores,
+               "choices": result["choices"], "scores": scores,
                "seconds": round(time.time() - t0, 1)}
     write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
     for k, s in scores.items():
@@ -193,11 +203,11 @@ def _tensorboard(logdir: Path, result: dict, options: list) -> None:
     from torch.utils.tensorboard import SummaryWriter
     w = SummaryWriter(log_dir=str(logdir))
     try:
-        rise = [o["simulated_rise_cm"] for o in options]
+        rise = {o["option"]: o["simulated_rise_cm"] for o in options}
         for i in range(len(result["right"][0])):
             right = [r[i] for r in result["right"]]
             w.add_scalar(f"{REWARD_TRIALS_TAG}/correct_share", sum(right) / len(right), i + 1)
-            got = [rise[c[i]] for c in result["choices"]]
+            got = [rise[c[i][0]] for c in result["choices"]]   # each trial's first drop, from the file's levels
             w.add_scalar(f"{REWARD_TRIALS_TAG}/reward_rise_cm", sum(got) / len(got), i + 1)
         w.flush()
     finally:
