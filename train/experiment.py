@@ -248,7 +248,7 @@ class Experiment:
                     for name in self.probe_names]
             acts, present = (torch.stack([s[i] for s in seen], 1).flatten(0, 1) for i in (0, 1))   # order-major
             agents = self.agent.select(torch.arange(B).repeat_interleave(n))
-            return agents.anticipate_acts(acts, present).expected.view(B, n)
+            return agents.anticipate_acts(acts, present, decoded=False).expected.view(B, n)
 
     def probe_errors(self) -> list[float | None]:
         pred = self.probe_predictions()

@@ -518,6 +518,6 @@ class _Walk:
     def _probe_predictions(self, agents: Agent) -> torch.Tensor:
         """(B, n_probes) what each agent expects every probe to displace, learning frozen (as Experiment's)."""
         B = agents.batch
-        cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1)).expected
-                for acts, present in self.probe_acts]
+        cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1), decoded=False
+                                       ).expected for acts, present in self.probe_acts]
         return torch.stack(cols, dim=1) if cols else torch.zeros(B, 0)
