@@ -275,6 +275,21 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     return out
 
 
+def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
+               config: AgentConfig) -> dict:
+    """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
+    "final_probe_cm3": what the runner asks of its figure process (train/run_loop.py), which runs it beside the
+    detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
+    from aesop_torch.malloc import keep_freed_memory
+    from train.experiment import draw_orders
+
+    keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
+    out = run_population(train_names, probe_names, draw_orders(len(train_names), orders, seed), outcomes, probes,
+                         config, curves=True)
+    del out["final_probe_cm3"]
+    return out
+
+
 def _owned(owner: torch.Tensor, before: torch.Tensor, after: torch.Tensor, obj: torch.Tensor) -> torch.Tensor:
     """owner (B, S) with the slots before[b]..after[b] - 1 (filled by this step) set to obj[b]."""
     slot = torch.arange(owner.shape[1])

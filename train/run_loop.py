@@ -76,7 +76,7 @@ def prepare(args, objects, n_orders: int, physics=None):
             raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
         remove_leftovers(args.out)
         # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
-        orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
+        orders = draw_orders(len(objects.train), args.orders, args.seed, limit=FULL_RUNS)
         if physics is not None:
             physics.start()
         # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.experiment)
@@ -165,7 +165,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from sim.objects import archimedes_cm3
     from train.checkpoint import save_atomic, write_text_atomic
     from train.config import RunConfig, config_dict
-    from train.experiment import draw_orders, outcome_record, plain_measurement, senses_floor
+    from train.experiment import draw_orders, outcome_record, plain_measurement
     from train.physics import Physics, WorkerDied
     from train.progress import Step
     from train.summary import build_summary, knowledge_table
@@ -229,6 +229,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             exp.probes[name] = {"measurement": plain_measurement(m),
                                 "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
         checkpoint()
+    # every order as a population (more than the detailed ones) runs on the figure process beside the detailed
+    # orders and the goal trials: it needs only the measured outcomes (cached physics: all in by now)
+    population_job = _start_population(args, exp)
     # the goal trials' multi-drop sequences a planner would drop, simulated while the workers would idle (the
     # agents learn here, Figure 2 and the trials follow): a well-taught agent drops them; others are simulated then
     ahead = {s: physics.ahead(("trial", s, None)) for s in planner_sequences(objects)[:physics.workers]} \
@@ -258,22 +261,18 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
             if not per_episode:
                 bar.update(1, recs[0]["object"])
-    population = None
-    orders = draw_orders(len(exp.train_names), args.orders, args.seed)
-    if len(orders) > len(exp.orders):
-        from train.population import run_population
-        print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in detail)",
-              flush=True)
-        with Step("population", len(orders), "order") as bar:
-            population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
-                                        exp.config, progress=bar.to, curves=True)
-    # Figure 2 shows the exploration (a population's error bands over all its orders): drawn and written by the
-    # drawer while the goal trials run
-    start_drawer()   # main() started it
-    figure = _OPEN["drawer"].draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110,
-                                  senses_floor(exp.probes),
-                                  population and {k: population[k] for k in ("orders", "agree_fraction",
-                                                                             "most_common_knowledge", "curves")})
+    population = figure = None
+    if population_job is None:
+        orders = draw_orders(len(exp.train_names), args.orders, args.seed)
+        if len(orders) > len(exp.orders):   # not started above (outcomes measured per episode): here, in line
+            from train.population import run_population
+            print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in "
+                  "detail)", flush=True)
+            with Step("population", len(orders), "order") as bar:
+                population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
+                                            exp.config, progress=bar.to, curves=True)
+        # Figure 2 shows the exploration: drawn and written by the drawer while the goal trials run
+        figure = _draw_figure(exp, out, population)
     if objects.trials:
         from train.trials import play_trials
         print(f"goal trials: {len(objects.trials)} trial(s) with each of {len(exp.orders)} order(s)' agents, the jar "
@@ -288,6 +287,14 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         for b, log in enumerate(logs):
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
+    if population_job is not None:   # the figure process ran it beside the trials: its result, then Figure 2
+        with Step("population", None, "order", announce=False):
+            try:
+                population = population_job.get()
+            except WorkerDied as e:
+                raise WorkerDied("the figure process", e.pid, e.exitcode) from None
+        print(f"population: done ({population['timing_s']['total']:.1f} s on the figure process)", flush=True)
+        figure = _draw_figure(exp, out, population)
     summary = build_summary(exp, population, config)
     try:
         image = figure.get()
@@ -303,6 +310,36 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
     return 0
+
+
+def _start_population(args, exp):
+    """Every order (when there are more than the detailed ones) as a population (train.population.run_orders) on the
+    figure process, started now: an object whose get() waits for its result; None when there is no population or
+    its outcomes are not all measured yet (per-episode physics: _run runs it in line at the end). The runner's own
+    process then runs the detailed orders and the goal trials meanwhile: all 9! orders of 9 objects took 23 of the
+    run's 40 s, and the detailed orders and the trials another 9 s after it."""
+    from train.run_config import count_orders
+
+    if count_orders(len(exp.train_names), args.orders) <= len(exp.orders) or \
+            any(n not in exp.outcomes for n in exp.train_names):
+        return None
+    print(f"population: {count_orders(len(exp.train_names), args.orders)} orders side by side on the figure process "
+          f"(the first {len(exp.orders)} also run in detail here)", flush=True)
+    start_drawer()   # main() started it
+    return _OPEN["drawer"].draw("train.population:run_orders", exp.train_names, exp.probe_names, args.orders,
+                                args.seed, exp.outcomes, exp.probes, exp.config)
+
+
+def _draw_figure(exp, out, population):
+    """Figure 2 (the exploration; a population's error bands over all its orders), drawn and written by the figure
+    process: an object whose get() waits for its image."""
+    from train.experiment import senses_floor
+
+    start_drawer()   # main() started it
+    return _OPEN["drawer"].draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110,
+                                senses_floor(exp.probes),
+                                population and {k: population[k] for k in ("orders", "agree_fraction",
+                                                                           "most_common_knowledge", "curves")})
 
 
 def _flat(prefix: str, d: dict) -> dict:
