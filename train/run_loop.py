@@ -79,6 +79,11 @@ def prepare(args, objects, n_orders: int, physics=None):
         orders = draw_orders(len(objects.train), args.orders, args.seed, limit=FULL_RUNS)
         if physics is not None:
             physics.start()
+            # the measurements are handed over now: the workers simulate while the experiment is built (its maps'
+            # training) and its first checkpoint written, which they waited for before (_run takes them up)
+            physics.submit_early(measurement_jobs(objects, [o.name for o in objects.train],
+                                                  [o.name for o in objects.probe], {}, {}, args.physics,
+                                                  args.frames)[-1])
         # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.experiment)
         config = copy.deepcopy(args.run_config.agent)
         try:
@@ -189,13 +194,10 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
     # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
     # agent learns nothing from it here)
-    todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
-    probes = [n for n in exp.probe_names if n not in exp.probes]
-    on_stands = {n for stand in objects.trials for n in stand}
-    jobs = [("drop", n, args.frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
-                                                        for n in probes]
+    todo, probes, on_stands, jobs = measurement_jobs(objects, exp.train_names, exp.probe_names, exp.outcomes,
+                                                     exp.probes, exp.physics, args.frames)
     probe_drops = {}
-    submitted = physics.submit(jobs)   # the workers start on them while the logs open
+    submitted = physics.submit(jobs)   # the workers start on them while the logs open (a new run's: since prepare)
     from train.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
     from train.trials import planner_sequences
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
@@ -310,6 +312,19 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
     return 0
+
+
+def measurement_jobs(objects, train_names, probe_names, outcomes: dict, probes_done: dict, physics: str,
+                     frames: bool) -> tuple[list, list, set, list]:
+    """(train objects to drop, probes to measure, the objects on a trial's stand, the physics jobs) a run still
+    needs before its episodes: with cached physics each distinct train object not yet in `outcomes` dropped once,
+    each probe not yet in `probes_done` inspected (dropped, when it waits on a trial's stand)."""
+    todo = [n for n in dict.fromkeys(train_names) if n not in outcomes] if physics == "cached" else []
+    probes = [n for n in probe_names if n not in probes_done]
+    on_stands = {n for stand in objects.trials for n in stand}
+    jobs = [("drop", n, frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
+                                                  for n in probes]
+    return todo, probes, on_stands, jobs
 
 
 def _start_population(args, exp):
