@@ -173,7 +173,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from train.experiment import draw_orders, outcome_record, plain_measurement
     from train.physics import Physics, WorkerDied
     from train.progress import Step
-    from train.summary import build_summary, knowledge_table
+    from train.summary import build_summary, knowledge_table, summary_text
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders, "model": args.model, "ablate": args.ablate}
     # the whole config as the run uses it: the agents' as the experiment holds it (seed, buffers sized), the world's
@@ -307,7 +307,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         log.close()   # not quietly: a write error here is the run's (one line, exit code 1)
     _OPEN["logs"] = []
     close_quietly()   # the workers and the drawer: every result is in
-    write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
+    write_text_atomic(summary_text(summary) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, config.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
