@@ -302,8 +302,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         image = figure.get()
     except WorkerDied as e:   # the drawer's pool names its process generically
         raise WorkerDied("the figure process", e.pid, e.exitcode) from None
+    shown = logs and logs[0].encoded("figure2", image)
     for log in logs:
-        log.image("figure2", image, exp.n_episodes)
+        log.shown(shown, exp.n_episodes)
         log.close()   # not quietly: a write error here is the run's (one line, exit code 1)
     _OPEN["logs"] = []
     close_quietly()   # the workers and the drawer: every result is in
