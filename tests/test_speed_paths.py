@@ -7,7 +7,12 @@ import torch
 
 from aesop_torch.agent import AgentConfig
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects
-from train.experiment import Experiment, closed_form_outcomes, draw_orders, stack_measurements
+from train.experiment import (
+    Experiment,
+    closed_form_outcomes,
+    draw_orders,
+    stack_measurements,
+)
 from train.physics import Physics
 from train.population import run_orders, run_population
 
