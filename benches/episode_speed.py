@@ -9,8 +9,9 @@ commit: the default run and all 9! orders of nine objects.
    10e7246, the main before issue 47), checked out by `git worktree` into a temporary directory: N runs each,
    alternately, so both see the same machine; median wall times and their ratio (baseline / this tree: above 1,
    this tree is faster), the same for the run's wait for its 13 exploration simulations (as the run reports it),
-   and whether summary.json is the same apart from its `commit` (the code's name), with the 1-minute load average
-   while they ran: the ratio depends on the machine's other jobs.
+   and which top-level keys of summary.json differ (its `commit`, the code's name, aside; against 10e7246 only
+   `config`, which gained keys since), with the 1-minute load average while they ran: the ratio depends on the
+   machine's other jobs.
 4. `python train/run.py --objects nine.json --orders all` (nine.json: the default set and a ninth train object, a
    blue heavy sphere, as benches/population.py: 9! = 362,880 orders as a population) the same way, M runs each.
 Skipped (said so) when git or the commit is not available. Printed, never asserted; the last line is
@@ -102,12 +103,11 @@ def timed_run(tree: Path, out: Path, extra: list[str]) -> tuple[float, float]:
     return wall, float(sims.group(1)) if sims else float("nan")
 
 
-def same_summary(a: Path, b: Path) -> bool:
-    """summary.json of two runs the same apart from `commit` (which names the tree that wrote it)."""
+def summary_differs(a: Path, b: Path) -> list[str]:
+    """The top-level keys whose values differ between two runs' summary.json, but `commit` (which names the tree
+    that wrote it): [] when they are the same (a `config` of another commit may hold keys added since)."""
     x, y = (json.loads((d / "summary.json").read_text()) for d in (a, b))
-    x.pop("commit", None)
-    y.pop("commit", None)
-    return x == y
+    return sorted(k for k in x.keys() | y.keys() if k != "commit" and x.get(k) != y.get(k))
 
 
 def side_by_side(what: str, extra: list[str], base: Path, commit: str, runs: int, tmp: Path) -> tuple[float, float]:
@@ -119,18 +119,18 @@ def side_by_side(what: str, extra: list[str], base: Path, commit: str, runs: int
         for name, tree in zip(names, (ROOT, base)):
             times[name].append(timed_run(tree, tmp / f"{what}_{name.replace(' ', '_')}_{i}", extra))
             load.append(os.getloadavg()[0])
-    same = same_summary(*(tmp / f"{what}_{n.replace(' ', '_')}_{runs - 1}" for n in names))
+    differs = summary_differs(*(tmp / f"{what}_{n.replace(' ', '_')}_{runs - 1}" for n in names))
     med = {k: statistics.median(w for w, _ in v) for k, v in times.items()}
     sims = {k: statistics.median(s for _, s in v) for k, v in times.items()}
-    print(f"{what} (python train/run.py {' '.join(extra)}), {runs} runs each, alternately (1-minute load average "
+    print(f"{what} (python {' '.join(['train/run.py', *extra])}), {runs} runs each, alternately (1-minute load average "
           f"{min(load):.1f}-{max(load):.1f}); median wall (all runs), and of it the wait for the exploration's "
           f"simulations:")
     for name, v in times.items():
         print(f"  {name:10s} {med[name]:6.2f} s   ({', '.join(f'{w:.2f}' for w, _ in v)});   simulations "
               f"{sims[name]:5.2f} s   ({', '.join(f'{x:.2f}' for _, x in v)})")
     print(f"  speed-up {commit} / this tree: {med[commit] / med['this tree']:.2f}x (simulations "
-          f"{sims[commit] / sims['this tree']:.2f}x); summary.json {'the same' if same else 'DIFFERS'} apart from "
-          "its commit", flush=True)
+          f"{sims[commit] / sims['this tree']:.2f}x); summary.json "
+          + (f"differs in {', '.join(differs)}" if differs else "the same") + " (its commit aside)", flush=True)
     return med["this tree"], med[commit]
 
 
