@@ -7,6 +7,7 @@ from dataclasses import asdict, dataclass, field
 from typing import ClassVar
 
 from .encoders import PROPERTIES, SPLIT_PROPERTIES, EncoderConfig
+from .exploration import EXPLORE
 from .hub import HubConfig
 from .memory import MemoryConfig
 from .rules import RulesConfig
@@ -20,7 +21,7 @@ OBJECT_ROWS = (ROW_OBJECT,) + tuple(range(9, 20))    # the object hub: 12 rows o
 AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in range(20))
 
 MODELS = ("paper", "contextual", "extended")
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
+ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit", "boundary"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
@@ -40,7 +41,7 @@ class AgentConfig:
     # from one 5-neuron row, exact recall from the object cue held to ~32 episodes, from 12 2-neuron rows it holds
     # to 230 (benches/memory_capacity.py). Sparse 2-of-50 rows are the memory's best case (random episodes: 275).
     # A full hub refuses a new object (HubConfig.when_full, the library's default, kept here): a run is sized for its
-    # objects (train.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
+    # objects (train.learning.experiment sizes hub and memory to them, up to 230), and forgetting would only hide a run too
     # big for its agents. A longer life sets both when_full to "forget_oldest" or "forget_weakest" (Agent._encode:
     # an object's assembly and its episodes leave together).
     hub: HubConfig = field(default_factory=lambda: HubConfig(rows=len(OBJECT_ROWS), assembly_size=2))
@@ -123,6 +124,11 @@ class AgentConfig:
     # ridge of the sink-or-float boundary (logistic, in the readout's log features): the recalled fates are often
     # separable, and this keeps the boundary finite and its slopes of order 10 per log unit (sharp within ~10 %)
     fate_ridge: float = 1e-2
+    # contextual: the ridge of its fate boundary (fate_boundary.py), fitted over the maps' decoded values, where size
+    # and weight span 0..1 for 3.4 and 7.6 log units: a boundary as sharp as fate_ridge's needs slopes ~50x larger,
+    # so a ridge ~100x smaller. The probes' fate after 24 objects with the right knowledge given: right 75 / 79 /
+    # 81 % at 1e-2 / 1e-3 / 1e-4 (tuning seeds 1004-1009); a 5 cm cube's fate flips at 141 g at 1e-4 (125 g true)
+    fate_boundary_ridge: float = 1e-4
     # names (a teacher's words, measurement["words"]) are bound to an object's hub assembly one-shot, like its
     # properties, but do not take part in the bottom-up cue while the object is in view: recall, the rules and the
     # readout then see exactly what they saw before names were taught (an unnamed probe and a named object are cued
@@ -144,7 +150,9 @@ class AgentConfig:
     # parts switched off, for ablations (ABLATIONS): "rules" (no rule ever fires: the strengths stay at 1, the
     # knowledge unknown), "gating" (the memory's cue ignores the strengths: knowledge no longer reaches recall),
     # "prior" (extended only: the readout's fit without its physics priors: free slopes, size as a length, no volume
-    # feature, a fate boundary over the properties)
+    # feature, a fate boundary over the properties); contextual only: "context" (one set of strengths, no
+    # fates seen), "fit" (the reward read as the recall-weighted average) and "boundary" (the expected fate by the
+    # recalled fates' recall-weighted vote, not a boundary fitted over their perceived properties: fate_boundary.py)
     ablate: tuple = ()
     # the paper model's readout weighs each recalled episode by its recall strength to this power. A recall brings
     # back nearly every stored episode (a cue touches most of them a little), so at power 1 the average is close to
@@ -181,6 +189,10 @@ class AgentConfig:
     # strongest counts 3 % of it, and the ones past the first few barely count; recall is most of an episode's time
     # (a whole recall settles the network once per episode it brings back)
     fate_recalls: int = 8
+    # who chooses the next object (exploration.EXPLORE): "teacher", the order given (the paper's); "active", the
+    # robot, the object on the stand whose comparison with a remembered episode would be cleanest for what is still
+    # unknown (aesop_torch/exploration.py). Off by default: the paper's teacher presents the objects
+    explore: str = "teacher"
     seed: int = 0
 
     @classmethod
@@ -226,12 +238,17 @@ class AgentConfig:
         if self.learning not in LEARNING or self.readout not in READOUTS:
             raise ValueError(f"AgentConfig.learning must be one of {', '.join(LEARNING)} and readout one of "
                              f"{', '.join(READOUTS)}, got {self.learning!r}, {self.readout!r}")
+        if self.readout == "prior_fit" and self.encoder.size_from != "cube_root":
+            raise ValueError(f"AgentConfig.readout 'prior_fit' reads size as the cube root of the bounding box's "
+                             f"volume (its prior is volume = fill x size^3), not as {self.encoder.size_from!r}")
         if self.readout == "prior_fit" and tuple(self.encoder.properties) != PROPERTIES:
             raise ValueError(f"AgentConfig.readout 'prior_fit' reads the paper's four properties {PROPERTIES} (its "
                              f"priors are on shape's fill and size as a length), not {tuple(self.encoder.properties)}")
         if not 0.0 <= self.compare_floor <= 1.0 or not self.fit_sharpness > 0 or not self.fate_recalls >= 1:
             raise ValueError(f"AgentConfig.compare_floor must be in 0..1, fit_sharpness > 0 and fate_recalls >= 1, "
                              f"got {self.compare_floor}, {self.fit_sharpness}, {self.fate_recalls}")
+        if self.explore not in EXPLORE:
+            raise ValueError(f"AgentConfig.explore must be one of {', '.join(EXPLORE)}, got {self.explore!r}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
@@ -258,4 +275,7 @@ class AgentConfig:
         if d.get("model") == "extended":   # a config from before the models were made of parts
             d.setdefault("learning", "evidence")
             d.setdefault("readout", "prior_fit")
+        if d.get("model") == "contextual" and "fate_boundary_ridge" not in d:
+            # a contextual agent from before the fate boundary learned with the recalled fates' vote: it goes on so
+            d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "boundary"]))
         return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})

@@ -9,7 +9,7 @@ Each measurement is turned into the input of one map:
   shape  = [fill, extent[1] / extent[0], extent[2] / extent[0]]   (3-d, extents sorted descending: size-invariant)
   size   = log(cube root of the bounding-box volume) normalised to [0, 1] over size_min_cm..size_max_cm   (1-d):
            one length for how big the object is, as the paper's size; the largest extent alone would call a thin
-           rod as big as a cube of the same height
+           rod as big as a cube of the same height (EncoderConfig.size_from "largest" reads it so, as an option)
   weight = log(mass) normalised to [0, 1] over mass_min_g..mass_max_g               (1-d)
   word   = bag of words over a fixed vocabulary, scaled to unit length              (22-d); the word map hears
            the words one at a time: its activity for a phrase is the sum of each word's own activity pattern, each
@@ -51,6 +51,7 @@ GOAL_WORDS = ("reach", "ball")
 VOCABULARY = COLOR_WORDS + SHAPE_WORDS + ADJECTIVES + GOAL_WORDS
 # heard and let pass: they name nothing, so they have no place on the word map
 FUNCTION_WORDS = ("the", "a")
+SIZE_FROM = ("cube_root", "largest")   # EncoderConfig.size_from
 SHAPE_FILL = {"cylinder": math.pi / 4, "cube": 1.0, "sphere": math.pi / 6, "box": 1.0}  # volume / bounding box
 
 
@@ -67,6 +68,11 @@ class EncoderConfig:
     # the object's properties, each perceived on a map of its own: the paper's four (PROPERTIES), or shape split
     # into fill and elongation (SPLIT_PROPERTIES)
     properties: tuple = PROPERTIES
+    # how size is read from the three extents: "cube_root", the cube root of the bounding box's volume (the
+    # default: one length for how big the object is; it carries a trace of the law, since log volume is then exactly
+    # log fill + 3 log size), or "largest", the largest extent (what a hand spans; a thin rod is then as big as a cube
+    # of its length), to measure what the model owes to that choice (docs/model.md)
+    size_from: str = "cube_root"
     # extra context properties perceived with the object (e.g. an apparatus' tube width or water level), each a 1-d
     # value in 0..1 given as measurement["context"][name], each on a SOM map of its own; none by default, so the
     # default agent has exactly the paper's four property maps and the word map
@@ -74,6 +80,8 @@ class EncoderConfig:
 
     def __post_init__(self):
         self.properties, self.context = tuple(self.properties), tuple(self.context)
+        if self.size_from not in SIZE_FROM:
+            raise ValueError(f"EncoderConfig.size_from must be one of {', '.join(SIZE_FROM)}, got {self.size_from!r}")
         if self.properties not in (PROPERTIES, SPLIT_PROPERTIES):
             raise ValueError(f"EncoderConfig.properties must be {PROPERTIES} or {SPLIT_PROPERTIES}, "
                              f"got {self.properties}")
@@ -176,7 +184,8 @@ class SensoryEncoder(nn.Module):
                 out["shape"] = torch.cat([fill[:, None], ratios], -1)
             if "fill" in c.properties:
                 out["fill"], out["elongation"] = fill[:, None], ratios
-            out["size"] = _log_unit(ext.prod(-1, keepdim=True) ** (1.0 / 3.0), c.size_min_cm, c.size_max_cm)
+            length = ext[:, :1] if c.size_from == "largest" else ext.prod(-1, keepdim=True) ** (1.0 / 3.0)
+            out["size"] = _log_unit(length, c.size_min_cm, c.size_max_cm)
         if "mass_g" in measurement:
             mass = _batched(measurement["mass_g"], "mass_g", ())
             if (mass <= 0).any():

@@ -27,6 +27,7 @@ import math
 import torch
 
 from .encoders import PROPERTIES, EncoderConfig
+from .fate_boundary import logistic_at
 from .rules import IRRELEVANT
 
 # the readout's features, one column block per property: colour rgb, shape log fill, log size, log mass. The
@@ -225,17 +226,6 @@ def will_sink(cols: torch.Tensor, d: torch.Tensor, fates: torch.Tensor, weight: 
     """P(sinks) of the present object: logistic regression of the recalled episodes' fates (B, K) on their
     features relative to the present object's, d (B, K, F), over the feature columns `cols` (B, F); every
     recalled episode counts once (a boundary needs its far examples as much as its near ones), Newton steps with
-    a small ridge (the classes are often separable). Its intercept is the log-odds at the present object."""
-    B, K, F = d.shape
-    A = torch.cat([torch.ones(B, K, 1, dtype=d.dtype), d * cols[:, None]], -1)  # (B, K, 1 + F)
-    w = (weight > 0) * (fates >= 0)
-    y = (fates == 1).to(d.dtype)
-    ridge = torch.eye(1 + F, dtype=d.dtype) * fate_ridge
-    ridge[0, 0] = 1e-6
-    beta = torch.zeros(B, 1 + F, dtype=d.dtype)
-    for _ in range(steps):
-        prob = torch.sigmoid(torch.einsum("bkf,bf->bk", A, beta))
-        grad = torch.einsum("bkf,bk->bf", A, w * (y - prob)) - beta @ ridge
-        hess = torch.einsum("bkf,bk,bkg->bfg", A, w * prob * (1 - prob), A) + ridge
-        beta = beta + torch.linalg.solve(hess, grad[..., None])[..., 0]
-    return torch.sigmoid(beta[:, 0])
+    a small ridge (the classes are often separable). Its intercept is the log-odds at the present object
+    (fate_boundary.logistic_at, the contextual model's fit too)."""
+    return logistic_at(d, fates, (weight > 0).to(d.dtype), cols, fate_ridge, steps)

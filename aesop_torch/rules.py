@@ -50,6 +50,7 @@ PROPERTIES = ("color", "shape", "size", "weight")
 RULE_NAMES = ("S", "E", "G", "U")  # codes 0..3 in `CausalRules.apply`'s output
 STATUS_QUO, ELIMINATION, GROWTH, UNCERTAINTY = range(4)
 STATES = ("unknown", "likely_irrelevant", "dominant", "irrelevant")
+KNOWLEDGE_LETTERS = "ULDI"   # one letter per STATES code, in its order: a knowledge key such as "IDUU"
 UNKNOWN, LIKELY_IRRELEVANT, DOMINANT, IRRELEVANT = range(4)
 CONTEXTS = ("floating", "sinking", "mixed")   # both floated, both sank, one of each (or a fate not seen)
 FLOATING, SINKING, MIXED = range(3)

@@ -8,6 +8,9 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 (8 probes), and lives of 230 train objects in one order each (16 probes). Conditions:
 
 - paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
+- contextual and its ablations (-rules, -gating, -context, -fit, -boundary: the expected fate by the recalled fates'
+  vote instead of a fitted boundary), and contextual +active: the robot chooses its next object (`explore = "active"`,
+  aesop_torch/exploration.py) from the teacher's first;
 - extended, extended -rules, extended -prior (its readout without the physics priors);
 - on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
   rules off, what its readout can do when the knowledge is right;
@@ -25,7 +28,7 @@ extended_rules_off_ratio_24=` (err_24 from the sets of 24, err_64 and err_230 fr
 model's error over the model's). `--record` writes the output into BENCHMARKS.md.
 
 The agent conditions (the six above) run as the sweep benches/ablation.toml runs them: each (condition, set) is
-train/sweep.py's cell (`train.sweep.run_cell`, one code path) and their figures are train/report.py's medians, so
+train/sweep.py's cell (`train.sweeps.cell.run_cell`, one code path) and their figures are train/report.py's medians, so
 `python train/sweep.py benches/ablation.toml` then `python -m train.report` gives these figures digit for digit (and
 at scale, on a Ray cluster). The peers and paper +knowledge (its knowledge set by hand) are no sweep conditions: they
 run here, their medians taken the same way.
@@ -49,17 +52,18 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 import torch  # noqa: E402
 
 from aesop_torch.agent import Agent, AgentConfig  # noqa: E402
-from aesop_torch.rules import DOMINANT, IRRELEVANT  # noqa: E402
+from aesop_torch.rules import DOMINANT, IRRELEVANT, KNOWLEDGE_LETTERS  # noqa: E402
 from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.population import knowledge_keys  # noqa: E402
-from train.physics import cores  # noqa: E402
-from train.progress import Step  # noqa: E402
-from train import sweep  # noqa: E402
-from train.report import summarise  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.learning.population import knowledge_keys  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
+from train.common.progress import Step  # noqa: E402
+from train.sweeps import cell as sweep_cell  # noqa: E402
+from train.sweeps import spec as sweep_spec  # noqa: E402
+from train.sweeps.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
 
@@ -67,8 +71,18 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual": ("contextual", ()), "contextual -rules": ("contextual", ("rules",)),
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
+          "contextual -boundary": ("contextual", ("boundary",)),
+          "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
+# conditions that differ from their model by a config key, not an ablation: the robot chooses its next object
+# (AgentConfig.explore, aesop_torch/exploration.py) instead of the teacher's order
+OVERRIDES = {"contextual +active": {"explore": "active"},
+             # size read as the largest extent, not the cube root of the bounding box's volume (docs/model.md)
+             "contextual size=largest": {"encoder.size_from": "largest"}}
+# run only when --conditions names them
+ON_REQUEST = ("contextual size=largest",)
+DEFAULT_AGENTS = [c for c in MODELS if c not in ON_REQUEST]   # the agent conditions run by default (ablation.toml)
 PEERS = ("kNN", "MLP", "kNN+", "MLP+")
 # not run by default: the paper model with the physically right knowledge set by hand and its rules off (colour
 # eliminated, size and weight dominant, shape untouched): what its readout does when the knowledge is right
@@ -139,6 +153,9 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
         return {"errors": errs}
     model, ablate, given = GIVEN[condition] if condition in GIVEN else (*MODELS[condition], None)
     cfg = AgentConfig.named(model, ablate=ablate, seed=seed_)
+    if condition in OVERRIDES:
+        from train.config import apply_overrides
+        cfg = apply_overrides(cfg, OVERRIDES[condition])
     cfg.memory.max_episodes = cfg.hub.max_assemblies = n_train
     agent = Agent(cfg, batch=B)
     if given is not None and torch.tensor(given).ndim == 2:   # per context: the contextual rules' strengths
@@ -147,8 +164,12 @@ def run(condition: str, seed_: int, n_train: int, n_probe: int, n_orders: int, c
     elif given is not None:
         agent.hub.strength[:, :len(given)] = torch.tensor(given)
     errs = {}
+    active = cfg.explore == "active"
+    if active:   # the robot chooses its next object (as train/sweep.py run_cell)
+        from aesop_torch.exploration import choose_in_order
+        seen = agent.activities(meas)
     for t in range(n_train):
-        obj = orders[:, t]
+        obj = choose_in_order(agent, *seen, orders, t) if active else orders[:, t]
         agent.step({k: v[obj] for k, v in meas.items()}, ep["observed_cm3"][obj], ep["goal_before"][obj],
                    ep["goal_after"][obj], sank=ep["sank"][obj])
         if t + 1 in checks:
@@ -167,7 +188,8 @@ GROUPS = {"8": "sets of 8", "24": "sets of 24", "life": "lives"}
 def sweep_doc(conditions, plan, first_seed: int) -> dict:
     """The agent conditions and sets of this run as a sweep file (benches/ablation.toml at the defaults)."""
     return {"world": "closed_form",
-            "conditions": [{"name": c, "model": MODELS[c][0], "ablate": list(MODELS[c][1])} for c in conditions],
+            "conditions": [{"name": c, "model": MODELS[c][0], "ablate": list(MODELS[c][1]),
+                            **({"overrides": OVERRIDES[c]} if c in OVERRIDES else {})} for c in conditions],
             "sets": [{"name": GROUPS[kind], "generate": {"seeds": [first_seed, first_seed + n_sets], "train": n_train,
                                                          "probe": n_probe, "pairs": True},
                       "orders": n_orders, "checks": list(checks)}
@@ -178,17 +200,17 @@ def _task(t):
     torch.set_num_threads(1)
     if t[0] == "cell":   # an agent condition: the sweep's cell, and its wall time
         t0 = time.perf_counter()
-        table = sweep.run_cell(t[1]["spec"], t[1]["objects"])
+        table = sweep_cell.run_cell(t[1]["spec"], t[1]["objects"])
         return table, time.perf_counter() - t0
     return run(*t[1:])
 
 
 def agent_rows(conditions, plan, first_seed: int, workers: int, bar=None, times: dict | None = None):
-    """The rows (a pyarrow Table of train.sweep.schema()) of the agent conditions on the plan's sets: the sweep's
+    """The rows (a pyarrow Table of train.sweeps.cell.schema()) of the agent conditions on the plan's sets: the sweep's
     cells, run on `workers` processes. Equal, row for row, to train/sweep.py on sweep_doc's file. times: filled with
     {(condition, set group): [each cell's wall time, s]}."""
     import pyarrow as pa
-    _, cells = sweep.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
+    _, cells = sweep_spec.resolve(sweep_doc(conditions, plan, first_seed), ROOT)
     with multiprocessing.get_context("fork").Pool(workers) as pool:
         tables = []
         for c, (t, seconds) in zip(cells, pool.imap(_task, [("cell", c) for c in cells])):
@@ -245,7 +267,7 @@ def main():
     ap.add_argument("--life-objects", type=count, default=230, help="objects in a life")
     ap.add_argument("--orders", type=count, default=24)
     ap.add_argument("--first-seed", type=seed, default=0)
-    ap.add_argument("--conditions", default=",".join([*MODELS, *PEERS]),
+    ap.add_argument("--conditions", default=",".join([*DEFAULT_AGENTS, *PEERS]),
                     help="comma-separated subset of: " + ", ".join([*MODELS, *PEERS, *GIVEN]))
     ap.add_argument("--workers", type=count, default=cores(), help="processes (default: the machine's cores)")
     record_flag(ap)
@@ -304,7 +326,7 @@ def main():
 
         def share(prop, code):
             if c in MODELS:
-                return "/".join(f"{final_share(rows, c, GROUPS[k], prop, sweep.KNOWLEDGE_LETTERS[code]):.2f}"
+                return "/".join(f"{final_share(rows, c, GROUPS[k], prop, KNOWLEDGE_LETTERS[code]):.2f}"
                                 for k in ("8", "24", "life"))
             parts = [torch.cat([r["state"][:, r["properties"].index(prop)] for r in res[k, c]])
                      for k in ("8", "24", "life")]

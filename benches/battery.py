@@ -4,7 +4,7 @@
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
                               [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
 
-Per task (sim/tasks/<task>.json) and per kind of subject (train/battery.py): naive subjects have the studies'
+Per task (sim/tasks/<task>.json) and per kind of subject (train/battery/tasks.py): naive subjects have the studies'
 pre-training only (stones into a single jar-like tube of water), experienced ones a jar life of --jar-objects
 generated objects first. Every subject meets the test apparatus and objects on trial 1, chooses by a softmax over
 each option's value (its predicted rise less the reward's gap), the apparatus mirrored on half the trials, and
@@ -27,13 +27,15 @@ al. 2014), out of those both did. The protocol's numbers were chosen on seeds 10
 from __future__ import annotations
 
 import argparse
-import multiprocessing
 import sys
 import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+from train.common import exits  # noqa: E402  signals: one line, exit code 128 + the signal, the workers ended
+if __name__ == "__main__":
+    exits.early_signals()
 
 from cli_args import at_least, count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402
@@ -94,7 +96,7 @@ def _job(args):
     import torch
     torch.set_num_threads(1)
     from sim.apparatus import load_task
-    from train.battery import Protocol, make_subjects, run_task
+    from train.battery.tasks import Protocol, make_subjects, run_task
     model, ablate, kind, s, subjects, task_names, aim, jar_objects, trials = args
     protocol = Protocol(jar_objects=jar_objects, trials=trials)
     ready = {s: make_subjects(model, kind, s, subjects, ablate, protocol)}
@@ -202,15 +204,19 @@ def main(argv=None) -> None:
         png.parent.mkdir(parents=True, exist_ok=True)
     except OSError as e:
         ap.exit(2, f"battery: --out {a.out}: {e}\n")
-    from train.battery import agreement, analyse
+    from train.battery.tasks import agreement, analyse
     t0 = time.perf_counter()
     seeds = list(range(a.first_seed, a.first_seed + a.seeds))
     conds = conditions(a.models, a.kinds, bool(a.ablate))
     jobs = [(m, ab, k, s, a.subjects, list(tasks), a.aim, a.jar_objects, a.trials) for m, ab, k in conds
             for s in seeds]
     if a.workers > 1 and len(jobs) > 1:
-        with multiprocessing.get_context("fork").Pool(min(a.workers, len(jobs))) as pool:
+        from train.learning.sim_pool import end_pool, quiet_pool   # workers ignore Ctrl-C, die with this process
+        pool = quiet_pool(min(a.workers, len(jobs)), None, what="a battery worker")
+        try:
             done = dict(pool.imap_unordered(_job, jobs))
+        finally:
+            end_pool(pool)
     else:
         done = dict(map(_job, jobs))
     merged = {}
@@ -282,4 +288,11 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    run_main("battery", main)
+    with exits.ending_signals():
+        try:
+            exits.raise_pending()
+            run_main("battery", main)
+        except KeyboardInterrupt as e:
+            by, code = exits.how(e)
+            print(f"{exits.fresh_line()}battery: interrupted{by}", file=sys.stderr)
+            sys.exit(code)

@@ -42,7 +42,7 @@ from sim.water import Water  # noqa: E402
 from sim.world import World  # noqa: E402
 from cli_args import count, record_flag  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
-from train.physics import cores  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
 
 
 def episode() -> float:

@@ -27,7 +27,7 @@ sequential_equals_batch=F median_error_8=E median_error_24=E sets_order_independ
 tracked file is written.
 
 The agent runs as the sweep benches/generalization.toml runs it: each set is train/sweep.py's cell
-(`train.sweep.run_cell`: the set's seed draws the noise, the orders and the agent; all its orders one batched agent,
+(`train.sweeps.cell.run_cell`: the set's seed draws the noise, the orders and the agent; all its orders one batched agent,
 the probes predicted after every episode) and its figures (the error curve, both agreements, the batch answers,
 colour and weight) are train/report.py's, so `python train/sweep.py benches/generalization.toml` then
 `python -m train.report` gives them digit for digit (the condition named --model), and at scale on a Ray cluster.
@@ -55,10 +55,11 @@ import torch  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.progress import Step  # noqa: E402
-from train import sweep  # noqa: E402
-from train.report import summarise  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.common.progress import Step  # noqa: E402
+from train.sweeps import cell as sweep_cell  # noqa: E402
+from train.sweeps import spec as sweep_spec  # noqa: E402
+from train.sweeps.report import summarise  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
@@ -146,7 +147,7 @@ def law_form(train_x: torch.Tensor, train_y: torch.Tensor, train_sank: torch.Ten
 
 
 def world(seed: int, n_train: int, n_probe: int = 8):
-    """A generated set's world, as train/sweep.py's cell sees it (train.sweep.world_outcomes, closed_form): the train
+    """A generated set's world, as train/sweep.py's cell sees it (train.sweeps.cell.world_outcomes, closed_form): the train
     objects' measurements and outcomes, the probes' measurements, truths and fates."""
     objs = parse_objects(generate(seed, n_train, n_probe, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
@@ -191,13 +192,13 @@ def sweep_doc(model: str, sets: int, long_sets: int, orders: int, first_seed: in
 
 
 def agent_rows(doc: dict, bar=None):
-    """The rows (a pyarrow Table of train.sweep.schema()) of the sweep file `doc`: its cells run here, one after
-    another (`train.sweep.run_cell`); equal, row for row, to train/sweep.py on the same file."""
+    """The rows (a pyarrow Table of train.sweeps.cell.schema()) of the sweep file `doc`: its cells run here, one after
+    another (`train.sweeps.cell.run_cell`); equal, row for row, to train/sweep.py on the same file."""
     import pyarrow as pa
-    _, cells = sweep.resolve(doc, ROOT)
+    _, cells = sweep_spec.resolve(doc, ROOT)
     tables = []
     for c in cells:
-        tables.append(sweep.run_cell(c["spec"], c["objects"]))
+        tables.append(sweep_cell.run_cell(c["spec"], c["objects"]))
         if bar is not None:
             bar.update(1)
     return pa.concat_tables(tables)

@@ -16,7 +16,7 @@ how many sets' errors fell and rose since the previous count, and the median ove
 `median_error_8=E ... median_error_230=E`. `--record` writes the output into BENCHMARKS.md.
 
 The agent runs as the sweep benches/learning_curve.toml runs it: each life is train/sweep.py's cell
-(`train.sweep.run_cell`: the set's seed draws the noise, the order and the agent) and its figures (error, stored,
+(`train.sweeps.cell.run_cell`: the set's seed draws the noise, the order and the agent) and its figures (error, stored,
 recalled, the floor and the error over it, sets fell / rose) are train/report.py's, so `python train/sweep.py
 benches/learning_curve.toml` then `python -m train.report` gives them digit for digit (report.csv), and at scale on a
 Ray cluster. The peers are no sweep conditions: they run here on the same lives in the same order.
@@ -45,10 +45,11 @@ from generalization import knn, mlp, raw_features, rel_errors  # noqa: E402
 from sim.make_objects import generate  # noqa: E402
 from sim.objects import parse_objects  # noqa: E402
 from sim.sensor_model import SensorModel  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
-from train.progress import Step  # noqa: E402
-from train import sweep  # noqa: E402
-from train.report import summarise  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders, stack_measurements  # noqa: E402
+from train.common.progress import Step  # noqa: E402
+from train.sweeps import cell as sweep_cell  # noqa: E402
+from train.sweeps import spec as sweep_spec  # noqa: E402
+from train.sweeps.report import summarise  # noqa: E402
 from cli_args import at_least, count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 
@@ -108,11 +109,11 @@ def main():
     t0 = time.perf_counter()
     checks = [n for n in CHECKS if n < a.objects] + [a.objects]
     # the agent: train/sweep.py's cells (benches/learning_curve.toml at the defaults), its figures train/report.py's
-    _, cells = sweep.resolve(sweep_doc(a.model, a.sets, a.objects, a.first_seed, checks), ROOT)
+    _, cells = sweep_spec.resolve(sweep_doc(a.model, a.sets, a.objects, a.first_seed, checks), ROOT)
     tables, lives = [], []
     with Step("objects explored", a.sets * a.objects, unit="object", stream=sys.stderr) as bar:   # not recorded
         for c in cells:
-            tables.append(sweep.run_cell(c["spec"], c["objects"]))
+            tables.append(sweep_cell.run_cell(c["spec"], c["objects"]))
             lives.append(peers(c["spec"]["seed"], a.objects, checks))
             bar.update(a.objects)
             t = tables[-1]

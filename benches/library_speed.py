@@ -26,14 +26,14 @@ import torch  # noqa: E402
 
 from aesop_torch import Agent  # noqa: E402
 from cli_args import record_flag  # noqa: E402
-from train.experiment import Experiment, load_experiment, stack_measurements  # noqa: E402
+from train.learning.experiment import Experiment, load_experiment, stack_measurements  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
-from train.physics import cores  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
 
 CKPT = ROOT / "checkpoints" / "default.pt"
 GREEN_HEAVY_CYLINDER = {"rgb": [0.1, 0.7, 0.2], "extent_cm": [11.5, 6.36, 6.36], "fill": 0.785, "mass_g": 420.0}
 COLD = ("import time, sys; t = time.perf_counter(); sys.path.insert(0, {root!r}); "
-        "from train.experiment import load_experiment; load_experiment({ckpt!r}); print(time.perf_counter() - t)")
+        "from train.learning.experiment import load_experiment; load_experiment({ckpt!r}); print(time.perf_counter() - t)")
 
 
 def median_s(fn, repeats: int) -> float:

@@ -124,7 +124,7 @@ def agent_life(seed: int, n: int, n_probe: int = 16):
     from sim.make_objects import generate
     from sim.objects import parse_objects
     from sim.sensor_model import SensorModel
-    from train.experiment import closed_form_outcomes, stack_measurements
+    from train.learning.experiment import closed_form_outcomes, stack_measurements
     objs = parse_objects(generate(seed, n, n_probe, False))
     out, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
     cfg = AgentConfig()

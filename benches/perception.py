@@ -35,8 +35,8 @@ from sim.episode import _take  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSpec, load_objects  # noqa: E402
 from sim.oracle import truth  # noqa: E402
 from sim.world import World  # noqa: E402
-from train.physics import cores  # noqa: E402
-from train.progress import Step  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
+from train.common.progress import Step  # noqa: E402
 
 POSES = {"cylinder": ("upright", "turned"), "cube": ("upright", "turned"), "sphere": ("upright", "turned"),
          "box": ("upright", "turned", "on_side")}

@@ -1,4 +1,4 @@
-"""Throughput of train.population (every order at once) beside the plain trie, and the wall time of
+"""Throughput of train.learning.population (every order at once) beside the plain trie, and the wall time of
 `train/run.py --orders all` for 8 and 9 objects.
 
     python benches/population.py [--skip-run] [--repeats R] [--record]
@@ -35,8 +35,8 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 
 from aesop_torch.agent import AgentConfig  # noqa: E402
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects  # noqa: E402
-from train.experiment import closed_form_outcomes, draw_orders  # noqa: E402
-from train.population import run_population  # noqa: E402
+from train.learning.experiment import closed_form_outcomes, draw_orders  # noqa: E402
+from train.learning.population import run_population  # noqa: E402
 from cli_args import count, record_flag  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 

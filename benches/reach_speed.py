@@ -40,7 +40,7 @@ from sim.kinematics import ArmKinematics, IKConfig  # noqa: E402
 from sim.robot import HAND_PARENT_LINK, load_icub, quiet_c_output  # noqa: E402
 from cli_args import record_flag  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
-from train.physics import cores  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
 
 N_TARGETS = 1000
 # Root frame (x backward, y right, z up): 15-45 cm in front, 15 cm left to 40 cm right, 20 cm below to 30 cm above

@@ -40,7 +40,7 @@ class _Tee(io.TextIOBase):
 
 
 def block(name: str, command: str, output: str, when: datetime.date, torch_version: str) -> str:
-    from train.physics import cores   # here, not at the top: `python benches/record.py` has no root on sys.path
+    from train.learning.sim_pool import cores   # here, not at the top: `python benches/record.py` has no root on sys.path
     return (f"<!-- bench:{name} -->\n`{command}` on {when.isoformat()}, {cores()} cores, torch {torch_version}:\n\n"
             f"```\n{output.rstrip()}\n```\n<!-- /bench:{name} -->")
 

@@ -36,7 +36,7 @@ from aesop_torch.malloc import keep_freed_memory  # noqa: E402
 from aesop_torch.som import SelfOrganizingMap, SOMConfig  # noqa: E402
 from cli_args import record_flag  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
-from train.physics import cores  # noqa: E402
+from train.learning.sim_pool import cores  # noqa: E402
 
 MiniSom = None   # the peer's class, imported by main() once the arguments are read (--help needs no MiniSom)
 SAMPLES, UPDATES, EPOCHS = 5000, 50_000, 10

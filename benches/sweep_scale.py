@@ -4,17 +4,17 @@
 
 The cells (train/sweep.py): the paper model on generated sets of 8 objects (make_objects --pairs, seeds 0..,
 8 probes) in 8 orders, the probe error after every episode, the simulated robot's noise; about 1 s each on one
-core of the 2-core machine this was written on. Each is run and its Parquet file written (train.sweep.write_cell,
+core of the 2-core machine this was written on. Each is run and its Parquet file written (train.sweeps.store.write_cell,
 into a temporary directory), three ways:
 
-- plain: a loop in this process (`train.sweep.run_cell`, one torch thread), no Ray;
+- plain: a loop in this process (`train.sweeps.cell.run_cell`, one torch thread), no Ray;
 - plain 2: the same loop in 2 forked processes, each over every other cell, no Ray: the most 2 processes get
   out of this machine's cores (shared caches and memory bandwidth, or vCPUs that are one core's hyperthreads),
   the ceiling of any 2-worker speedup here;
-- ray 1 and ray 2: `train.sweep.run_sweep` on a local Ray instance of 1 and of 2 CPUs, started for the repeat
+- ray 1 and ray 2: `train.sweeps.cluster.run_sweep` on a local Ray instance of 1 and of 2 CPUs, started for the repeat
   (`ray.init`, timed apart) and shut down after it. The wall time is from the first cell handed to Ray to the
   last written, so it includes the workers' start-up (importing torch) but not ray.init. Each cell's Parquet
-  file is encoded on its worker (`train.sweep.encode_cell`); the driver writes the bytes.
+  file is encoded on its worker (`train.sweeps.store.encode_cell`); the driver writes the bytes.
 
 Printed, each the median over --repeats repeats: the wall time and cells/s of each way, ray.init's time, and
 
@@ -48,11 +48,11 @@ from record import run_main  # noqa: E402
 
 def cells_of(n: int) -> list[dict]:
     """n cells: the paper model on sets of 8 in 8 orders (seeds 0..n-1), checks at every episode."""
-    from train.sweep import _resolve
+    from train.sweeps.spec import resolve
     doc = {"conditions": [{"name": "paper", "model": "paper"}],
            "sets": [{"name": "sets of 8", "generate": {"seeds": [0, n], "train": 8, "probe": 8, "pairs": True},
                      "orders": 8}]}
-    return _resolve(doc, ROOT)[1]
+    return resolve(doc, ROOT)[1]
 
 
 class _Quiet:
@@ -64,7 +64,8 @@ class _Quiet:
 
 
 def plain(cells: list[dict], out: Path) -> float:
-    from train.sweep import run_cell, write_cell
+    from train.sweeps.cell import run_cell
+    from train.sweeps.store import write_cell
     t0 = time.perf_counter()
     for c in cells:
         write_cell(out, c["id"], run_cell(c["spec"], c["objects"]))
@@ -126,7 +127,7 @@ def on_ray(cells: list[dict], out: Path, workers: int) -> tuple[float, float, di
     of `workers` CPUs."""
     import ray
 
-    from train.sweep import run_sweep, start_ray
+    from train.sweeps.cluster import run_sweep, start_ray
     t0 = time.perf_counter()
     start_ray(None, workers)
     t1 = time.perf_counter()
@@ -150,7 +151,7 @@ def main():
     a = ap.parse_args()
     import torch
 
-    from train.progress import Step
+    from train.common.progress import Step
     torch.set_num_threads(1)
     cells = cells_of(a.cells)
     print(f"{a.cells} cells (the paper model, a generated set of 8 objects in 8 orders, probes after every "

@@ -38,9 +38,9 @@ def main(argv=None) -> None:
     import matplotlib.pyplot as plt
 
     from sim.objects import DEFAULT_OBJECTS_FILE, ObjectSet, load_objects
-    from train.experiment import load_experiment
-    from train.physics import Physics
-    from train.trials import play_trials
+    from train.learning.experiment import load_experiment
+    from train.learning.sim_pool import Physics
+    from train.learning.goal_trials import play_trials
 
     objects = load_objects(DEFAULT_OBJECTS_FILE)
     if a.trial > len(objects.trials):

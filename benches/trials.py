@@ -41,9 +41,9 @@ from sim.objects import ObjectSet, archimedes_cm3, load_objects, parse_objects  
 from sim.sensor_model import SensorModel  # noqa: E402
 from sim.trial import (closed_form_drop, drops_to_goal, heaviest_first, optimal_first, random_drops_mean,  # noqa: E402
                        reach_cm3)
-from train.experiment import Experiment, closed_form_outcomes, draw_orders  # noqa: E402
-from train.progress import Step  # noqa: E402
-from train.trials import roomy_copy, run_trials  # noqa: E402
+from train.learning.experiment import Experiment, closed_form_outcomes, draw_orders  # noqa: E402
+from train.common.progress import Step  # noqa: E402
+from train.learning.goal_trials import roomy_copy, run_trials  # noqa: E402
 from cli_args import count, record_flag, seed  # noqa: E402
 from record import run_main  # noqa: E402   # benches/record.py: keeps BENCHMARKS.md current (--record)
 

@@ -177,7 +177,7 @@ def drop_into_jar(world, name: str, record=None, t0: float | None = None) -> Epi
     return EpisodeOutcome(
         name=name, measurement={**seen.measurement, "mass_g": mass}, observed_cm3=(level_after - level_before) * area,
         level_before_cm=level_before, level_after_cm=level_after,
-        archimedes_cm3=archimedes_cm3(spec, world.objects.jar),
+        archimedes_cm3=archimedes_cm3(spec, world.objects.jar, world.config.tank.water.density / 1000.0),
         goal_reachable_before=reachable_before, goal_reached_after=reached_after, sank=sank, settled=settled,
         wall_s=time.perf_counter() - t0, frames=rec.frames if rec is not None else [], true=spec.true_values(),
         delivered=delivered)

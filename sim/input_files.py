@@ -23,19 +23,47 @@ import stat
 
 MAX_NESTING = 32        # the deepest schema read here nests 5 deep; deeper input would only exhaust the parser
 MAX_DIGITS = 32         # a float64 has 17 significant digits; 32 leaves room for any integer a file here holds
-MAX_SHOWN = 60          # characters of a key quoted in an error line
+MAX_SHOWN = 60          # characters of a refused value or key quoted in an error line (CONTRACTS.md)
 
 
 class InputFileError(ValueError):
     """An input file that is not read: one line saying why. A character that does not print (a newline, an ANSI
-    escape in a path or a key) appears as its Python escape, so the line cannot move or recolour a terminal."""
+    escape in a path or a key) appears as its Python escape, so the line cannot move or recolour a terminal.
+    From read_bytes, `reason` says which refusal it is ("kind", "size", "os") and `detail` its particulars (the
+    kind of file, or the system's reason), for a caller that words its own line."""
 
-    def __init__(self, message: str):
-        super().__init__("".join(c if c.isprintable() else repr(c)[1:-1] for c in str(message)))
+    def __init__(self, message: str, reason: str | None = None, detail: str | None = None):
+        super().__init__(printable(str(message)))
+        self.reason, self.detail = reason, detail
 
 
-def _quoted(key) -> str:
-    text = json.dumps(str(key), ensure_ascii=True)[1:-1].replace('\\"', '"')
+def kind_of(mode: int) -> str:
+    """What a file that is not a regular file is, from its st_mode: 'a directory', 'a FIFO (named pipe)', ..."""
+    return ("a directory" if stat.S_ISDIR(mode) else "a FIFO (named pipe)" if stat.S_ISFIFO(mode) else
+            "a device" if stat.S_ISCHR(mode) or stat.S_ISBLK(mode) else "a socket" if stat.S_ISSOCK(mode) else
+            "no regular file")
+
+
+def printable(text: str) -> str:
+    """Every character that does not print (a newline, an ANSI escape, a bidi control) as its Python escape: a line
+    that quotes it stays one line and cannot move or recolour a terminal."""
+    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
+
+
+def show(value) -> str:
+    """A refused value as an error line quotes it, the project's one quoter of input values (objects files, task
+    files, sweep files): JSON (so a string is quoted and every non-ASCII or control character escaped), cut to
+    MAX_SHOWN characters."""
+    try:
+        text = json.dumps(value, ensure_ascii=True)
+    except (TypeError, ValueError, RecursionError):   # not a JSON value (a Python object, a TOML date)
+        text = printable(repr(value))
+    return text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "..."
+
+
+def quoted(word) -> str:
+    """A key or a word as an error line quotes it: in single quotes, escaped as `show` escapes a string."""
+    text = json.dumps(str(word), ensure_ascii=True)[1:-1].replace('\\"', '"')
     return "'" + (text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "...") + "'"
 
 
@@ -59,17 +87,20 @@ def nesting(text: str) -> int:
 
 
 def read_bytes(path, what: str, max_bytes: int) -> bytes:
-    """The bytes of a regular file of at most max_bytes, read without blocking on a FIFO or a device."""
+    """The bytes of a regular file of at most max_bytes, read without blocking on a FIFO or a device and no further
+    than the limit (/dev/zero never ends). The one bounded reader of input files (the sweeps' read_bounded words
+    its refusals from `reason` and `detail`)."""
     try:
         fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0) | getattr(os, "O_CLOEXEC", 0))
         with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise InputFileError(f"{what} is not a regular file")
+            mode = os.fstat(f.fileno()).st_mode
+            if not stat.S_ISREG(mode):
+                raise InputFileError(f"{what} is {kind_of(mode)}, not a regular file", "kind", kind_of(mode))
             raw = f.read(max_bytes + 1)
     except OSError as e:
-        raise InputFileError(f"cannot read {what}: {type(e).__name__}: {e}") from None
+        raise InputFileError(f"cannot read {what}: {type(e).__name__}: {e}", "os", str(e.strerror or e)) from None
     if len(raw) > max_bytes:
-        raise InputFileError(f"{what} is larger than {max_bytes:,} bytes")
+        raise InputFileError(f"{what} is larger than {max_bytes:,} bytes", "size", f"{max_bytes:,} bytes")
     return raw
 
 
@@ -107,7 +138,7 @@ def _unique_keys(pairs: list) -> dict:
     out = {}
     for k, v in pairs:
         if k in out:
-            raise _Refused(f"the key {_quoted(k)} appears twice in one object (JSON would keep the last value "
+            raise _Refused(f"the key {quoted(k)} appears twice in one object (JSON would keep the last value "
                            "silently): remove one")
         out[k] = v
     return out

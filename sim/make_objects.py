@@ -21,12 +21,9 @@ a regular file. Every refusal (a bad flag too) is one line on stderr, exit code 
 from __future__ import annotations
 
 import argparse
-import errno
 import json
 import math
-import os
 import sys
-import tempfile
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -35,7 +32,8 @@ import numpy as np
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
     sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from sim.objects import PALETTE, ObjectsConfig, ObjectsFileError, _printable, parse_objects
+from sim.objects import ObjectsConfig, ObjectsFileError, _printable, parse_objects
+from sim.output_files import write_atomic
 
 PROG = "python -m sim.make_objects"
 
@@ -243,35 +241,11 @@ def write_atomically(out: Path, text: str, force: bool) -> None:
     if why:
         raise UsageError(why)
     try:
-        fd, tmp = tempfile.mkstemp(dir=out.parent, prefix=f".{out.name}.", suffix=".tmp")
-    except OSError as e:
-        raise UsageError(f"--out {out}: cannot write in {out.parent}: {e.strerror or e}") from None
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8") as f:
-            umask = os.umask(0)
-            os.umask(umask)
-            os.fchmod(f.fileno(), 0o666 & ~umask)   # as a plain open() would create it, not mkstemp's 0600
-            f.write(text)
-            f.flush()
-            os.fsync(f.fileno())
-        if force:
-            os.replace(tmp, out)
-        else:
-            try:
-                os.link(tmp, out)
-            except FileExistsError:
-                raise UsageError(f"--out {out} exists (--force to overwrite it)") from None
-            except OSError as e:
-                if e.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV, errno.EMLINK):
-                    raise
-                if os.path.lexists(out):
-                    raise UsageError(f"--out {out} exists (--force to overwrite it)") from None
-                os.replace(tmp, out)
+        write_atomic(out, text.encode("utf-8"), replace=force)
+    except FileExistsError:
+        raise UsageError(f"--out {out} exists (--force to overwrite it)") from None
     except OSError as e:
         raise UsageError(f"--out {out}: cannot write it: {e.strerror or e}") from None
-    finally:
-        if os.path.lexists(tmp):
-            os.unlink(tmp)
 
 
 def main(argv=None) -> int:

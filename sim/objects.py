@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from sim.input_files import printable, quoted, show
+
 DEFAULT_OBJECTS_FILE = Path(__file__).with_name("default_objects.json")
 WATER_DENSITY_G_CM3 = 1.0
 SHAPES = {"cylinder": 2, "cube": 1, "sphere": 1, "box": 3}  # shape -> number of dims
@@ -71,7 +73,6 @@ TRIAL_KEYS = {"stand", "goal"}
 DEFAULT_GOAL = "reach the green ball"   # the paper's goal: what the teacher says when a trial names none
 MAX_GOAL_CHARS = 200         # a goal is a short phrase; this bounds the error line that quotes it
 MAX_STAND = 8                # objects on the stand of one goal trial: the exact random baseline enumerates subsets
-MAX_SHOWN = 60               # characters of a refused value quoted in an error line
 
 
 class ObjectsFileError(ValueError):
@@ -85,24 +86,9 @@ class ObjectsFileError(ValueError):
         super().__init__(_printable(str(message)))
 
 
-def _printable(text: str) -> str:
-    return "".join(c if c.isprintable() else repr(c)[1:-1] for c in text)
-
-
-def _show(value) -> str:
-    """A refused value as the error line quotes it: JSON (so a string is quoted and every non-ASCII or control
-    character escaped), cut to MAX_SHOWN characters."""
-    try:
-        text = json.dumps(value, ensure_ascii=True)
-    except (TypeError, ValueError, RecursionError):   # not a JSON value (parse_objects on a Python object)
-        text = _printable(repr(value))
-    return text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "..."
-
-
-def _quoted(word) -> str:
-    """A key or a word as the error line quotes it: in single quotes, escaped as `_show` escapes a string."""
-    text = json.dumps(str(word), ensure_ascii=True)[1:-1].replace('\\"', '"')
-    return "'" + (text if len(text) <= MAX_SHOWN else text[:MAX_SHOWN - 3] + "...") + "'"
+# the quoters of sim/input_files.py (one home for every input file's refusals), under the names this module and
+# sim/apparatus.py use
+_printable, _show, _quoted = printable, show, quoted
 
 
 @dataclass(frozen=True)
@@ -148,7 +134,7 @@ class ObjectsConfig:
     min_water_depth_cm: float = 2.0
     # objects one life can meet: train (one episode each) plus pool (dropped in goal trials). Not the memory's 230
     # episodes: a memory or hub that forgets when full (MemoryConfig / HubConfig.when_full) runs any length, and the
-    # runner refuses up front only a `refuse` one that is too small (train/run_config.py check_capacity); 2000 bounds a
+    # runner refuses up front only a `refuse` one that is too small (train/runner/settings.py check_capacity); 2000 bounds a
     # file to what one life can simulate (about a second per drop with physics, ~35 min).
     max_objects: int = 2000
 
@@ -304,8 +290,9 @@ def min_mass_g_for(spec: ObjectSpec, jar: JarSpec, config: ObjectsConfig = Objec
     return max(config.min_mass_g, config.min_mass_per_area_g_cm2 * a / (1.0 - a / jar.area_cm2))
 
 
-def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
-    """The closed-form yardstick: water displaced once the object is at rest in the jar (1 g/cm^3 water).
+def archimedes_cm3(spec: ObjectSpec, jar: JarSpec, water_density_g_cm3: float = WATER_DENSITY_G_CM3) -> float:
+    """The closed-form yardstick: water displaced once the object is at rest in the jar (1 g/cm^3 water, or the
+    world's water: sim.water.WaterConfig.density / 1000, which the runner passes).
 
     A floater displaces its mass; a sinker its volume, or only its submerged part when it stands on the bottom and
     sticks out of the water. One formula covers both: V = min(m / rho, S(L0 + V / A)), where S(L) is the volume of
@@ -314,7 +301,7 @@ def archimedes_cm3(spec: ObjectSpec, jar: JarSpec) -> float:
     For a prism that sticks out this is L = L0 / (1 - a/A), V = a L. (A floater in water too shallow to float it
     is grounded and displaces S(L) < m; no object of the default set comes near that.)
     """
-    m_over_rho = spec.mass_g / WATER_DENSITY_G_CM3
+    m_over_rho = spec.mass_g / water_density_g_cm3
     A, L0 = jar.area_cm2, jar.water_depth_cm
 
     def excess(v: float) -> float:  # decreasing in v; zero at the answer

@@ -40,6 +40,7 @@ import numpy as np
 import pybullet as p
 import torch
 
+from sim.output_files import write_atomic
 from sim.quiet import quiet_c_output  # noqa: F401  (re-exported: the world uses it)
 
 ROBOT_MODEL = "iCubGazeboV2_5"
@@ -179,14 +180,8 @@ def _cached_urdf(config: RobotConfig | None) -> Path:
     root = ET.fromstring(text)
     _rewrite(root, share, config)
     out_dir.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=out_dir, suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(ET.tostring(root, encoding="utf-8", xml_declaration=True))
-        os.replace(tmp, out)  # atomic: a concurrent reader sees the old file or the whole new one
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    # atomic: a concurrent reader sees the old file or the whole new one
+    write_atomic(out, ET.tostring(root, encoding="utf-8", xml_declaration=True))
     return out
 
 

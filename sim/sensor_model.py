@@ -49,6 +49,12 @@ class SensorModel:
     # 0.001 cm, 0.11 cm^3); no part growing with the volume is measurable (the fit gives 0)
     outcome_rel_sd: float = 0.0
     outcome_abs_sd_cm3: float = 0.056
+    # the fate as the robot sees it (sim/perception.py rests_on_bottom: the side camera through the glass once the
+    # drop has settled), not the engine's density test. `python benches/fate_perception.py` (200 generated objects
+    # dropped with physics in the default jar, densities 0.8-1.25 g/cm^3 seed 0 and 0.97-1.03 seed 1): no floater was
+    # seen on the bottom; the sinkers of density 1.0010-1.0031 (4 of 4) were seen floating, still on their way down
+    # when the water settled; every one from 1.0034 up was seen on the bottom. The edge lies between the two.
+    fate_seen_sinking_above_g_cm3: float = 1.0033
 
     def rng(self, seed: int, name: str) -> np.random.Generator:
         return np.random.default_rng([seed, zlib.crc32(name.encode())])
@@ -63,6 +69,11 @@ class SensorModel:
         mass = max(self.min_felt_mass_g, spec.mass_g + float(rng.normal(0.0, self.mass_sd_g)))
         return {"rgb": [float(x) for x in rgb], "extent_cm": [float(x) for x in ext], "fill": fill,
                 "mass_g": float(mass)}
+
+    def sees_sinking(self, spec: ObjectSpec) -> bool:
+        """Whether the robot sees `spec` come to rest on the jar's bottom: denser than fate_seen_sinking_above_g_cm3
+        (an object barely denser than water is seen floating, as on the physics path)."""
+        return bool(spec.density_g_cm3 > self.fate_seen_sinking_above_g_cm3)
 
     def observe(self, spec: ObjectSpec, jar: JarSpec, rng: np.random.Generator) -> float:
         """The displaced volume the robot reads off the jar for `spec`, in cm^3."""

@@ -1,7 +1,7 @@
 """Goal trials: the ball starts out of reach, the stand holds several objects, and the water is NOT reset between the
 drops of one trial. The robot drops objects one at a time until the ball is reachable or the stand is empty.
 
-What lives here is the world's side of a trial and its yardsticks, never the agent's choice (train/trials.py):
+What lives here is the world's side of a trial and its yardsticks, never the agent's choice (train/learning/goal_trials.py):
 - `drop_next` (physics): one drop into the jar as it is, every object dropped before still in it; the same look,
   take, lift, weigh, carry and release as `sim.episode.drop_episode`, and the same IK reach test after it.
   The stand is a pedestal for one object: the other candidates wait beside it (not simulated) and the one chosen
@@ -95,9 +95,9 @@ def heaviest_first(masses) -> int:
 
 def closed_form_drop(outcomes: dict, need_cm3: float):
     """A trial's drops without physics: drop(sequences) -> per sequence, what the world reports for its last drop
-    (train.trials.run_trials' drop).
+    (train.learning.goal_trials.run_trials' drop).
 
-    outcomes: name -> that object's exploration outcome (train.experiment.outcome_record or closed_form_outcomes):
+    outcomes: name -> that object's exploration outcome (train.learning.experiment.outcome_record or closed_form_outcomes):
     its observed_cm3 (sensed, or Archimedes) and sank are reused, displacements add up in the jar, and the ball is
     reachable once their sum reaches need_cm3 (reach_cm3)."""
     def one(sequence) -> dict:
@@ -124,6 +124,6 @@ def drop_next(world, name: str, record=None):
 
 def simulate_sequence(world, names, record=None) -> list:
     """Drop `names` one after another into a fresh jar (World.reset, then World.drop_next each): their outcomes. The
-    runner simulates a trial's sequences this way on its worker pool (train/physics.py, train/trials.py)."""
+    runner simulates a trial's sequences this way on its worker pool (train/learning/sim_pool.py, train/learning/goal_trials.py)."""
     world.reset()
     return [world.drop_next(n, record) for n in names]

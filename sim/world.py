@@ -37,6 +37,7 @@ from sim.objects import ObjectSet, ObjectSpec, ObjectsConfig
 from sim.perception import CameraConfig, Percept, Workspace, look
 from sim.robot import FACING_PLUS_X, RobotConfig, load_icub, quiet_c_output
 from sim.sensor_model import SensorModel
+from sim.errors import WorldBuildError
 from sim.water import CM, G, Tank, TankConfig
 
 
@@ -494,9 +495,9 @@ class World:
     @contextmanager
     def _config_failures(self, what: str, name: str):
         """An episode that fails (the palm cannot reach, the camera does not see the object) in a world built from
-        a config other than the default: train.physics.WorldBuildError naming the drop and the reason, one line (the
+        a config other than the default: WorldBuildError naming the drop and the reason, one line (the
         runner ends on it, exit 1, its last checkpoint kept). Its settings passed every check made up front
-        (train/config_checks.py), so this is what the world found out by trying. With the default config the error
+        (train/runner/config_checks.py), so this is what the world found out by trying. With the default config the error
         is raised as it is: a failure there is a bug, with its traceback."""
         try:
             yield
@@ -504,7 +505,6 @@ class World:
             if self.config == WorldConfig() or name not in {o.name for o in self.objects.train + self.objects.probe
                                                                + self.objects.pool}:
                 raise
-            from train.physics import WorldBuildError
             lines = str(e).strip().splitlines()
             raise WorldBuildError(f"the {what} of '{name}' failed in this world: {type(e).__name__}: "
                                   f"{lines[0] if lines else ''}") from None

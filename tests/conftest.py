@@ -24,8 +24,8 @@ def local_ray():
     """One local Ray instance (2 CPUs) per test module that asks for it: starting one takes seconds."""
     import ray
 
-    from train import sweep
-    started = sweep.start_ray(None, 2)
+    from train.sweeps import cluster
+    started = cluster.start_ray(None, 2)
     yield
     if started:
         ray.shutdown()

@@ -1,4 +1,4 @@
-"""The battery's protocol (train/battery.py): no subject meets the test apparatus or a test object before trial 1,
+"""The battery's protocol (train/battery/tasks.py): no subject meets the test apparatus or a test object before trial 1,
 positions are counterbalanced, choices are a softmax over the options' values, agents learn from each outcome; the
 scoring's exact binomial test; the context option's default (off: the default agent's maps and output unchanged);
 the bench's last line on a tiny run."""
@@ -14,12 +14,12 @@ from pathlib import Path
 import pytest
 import torch
 
-import train.battery as battery
+import train.battery.tasks as battery
 from aesop_torch.agent import Agent
 from aesop_torch.encoders import (MAP_NAMES, EncoderConfig, SensoryEncoder, default_map_configs,
                                   developmental_samples)
 from sim.apparatus import load_task
-from train.battery import (CONTEXT, REWARD_SCALE, Protocol, Subjects, balanced_swaps, binomial_tail, context_agent,
+from train.battery.tasks import (CONTEXT, REWARD_SCALE, Protocol, Subjects, balanced_swaps, binomial_tail, context_agent,
                            make_config, make_subjects, play, run_task, score, softmax_choice, task_world)
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -1,4 +1,4 @@
-"""The battery's analysis (train/battery.py, the studies' statistics) on hand-made choices whose answers are computed
+"""The battery's analysis (train/battery/tasks.py, the studies' statistics) on hand-made choices whose answers are computed
 by hand: trial-1 intervals, the learning slope with a per-subject intercept (separation included), each subject's
 exact binomial test, P(right | previous right) vs P(right | previous wrong), and the agreement with the animals."""
 
@@ -6,7 +6,7 @@ import math
 
 import pytest
 
-from train.battery import after_outcome, agreement, analyse, learning_slope, proportion, subject_test
+from train.battery.tasks import after_outcome, agreement, analyse, learning_slope, proportion, subject_test
 
 Z = 1.959964
 

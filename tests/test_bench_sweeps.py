@@ -9,7 +9,9 @@ import pyarrow.compute as pc
 import pytest
 
 from train import sweep
-from train.report import summarise
+from train.sweeps import spec as sweep_spec
+from train.sweeps import store
+from train.sweeps.report import summarise
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCHES = ROOT / "benches"
@@ -54,15 +56,15 @@ def _toml(doc: dict) -> str:
 def test_the_benchs_defaults_are_its_sweep_file(ablation):
     """benches/ablation.toml is the bench at its defaults: the same resolved spec, so the same cells."""
     plan = [("8", 30, 8, 8, 24, (8,)), ("24", 10, 24, 8, 24, (8, 24)), ("life", 8, 230, 16, 1, (8, 24, 64, 230))]
-    mine, cells = sweep.resolve(ablation.sweep_doc(list(ablation.MODELS), plan, 0), ROOT)
-    shipped, shipped_cells = sweep.load_sweep(BENCHES / "ablation.toml")
+    mine, cells = sweep_spec.resolve(ablation.sweep_doc(ablation.DEFAULT_AGENTS, plan, 0), ROOT)
+    shipped, shipped_cells = sweep_spec.load_sweep(BENCHES / "ablation.toml")
     assert mine["conditions"] == shipped["conditions"] and mine["sets"] == shipped["sets"]
-    assert sorted(c["id"] for c in cells) == sorted(c["id"] for c in shipped_cells) and len(cells) == len(ablation.MODELS) * 48
+    assert sorted(c["id"] for c in cells) == sorted(c["id"] for c in shipped_cells) and len(cells) == len(ablation.DEFAULT_AGENTS) * 48
 
 
 def test_the_benchs_rows_and_figures_are_the_sweeps(tmp_path, ablation, local_ray, capsys):
     """A few cells through the bench's path (its process pool) and through train/sweep.py on Ray: equal rows, so
-    the bench's medians (train.report.summarise of its rows) are the report's."""
+    the bench's medians (train.sweeps.report.summarise of its rows) are the report's."""
     conditions = ["paper", "extended -prior"]
     plan = [("8", 2, 6, 3, 2, (2, 6)), ("life", 1, 9, 2, 1, (4, 9))]
     bench = _sorted(ablation.agent_rows(conditions, plan, 5, workers=1))
@@ -70,7 +72,7 @@ def test_the_benchs_rows_and_figures_are_the_sweeps(tmp_path, ablation, local_ra
     path.write_text(_toml(ablation.sweep_doc(conditions, plan, 5)))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
     capsys.readouterr()
-    swept = _sorted(sweep.read_cells(tmp_path / "out"))
+    swept = _sorted(store.read_cells(tmp_path / "out"))
     assert bench.num_rows == 2 * (2 * 2 * 6 + 9) and bench.equals(swept)
     s = summarise(swept)
     # the figures by hand from the rows: the median over (set, order) of the per-run probe error at a check
@@ -110,14 +112,14 @@ def _last_line(lines: list[str]) -> dict:
 
 def test_the_generalization_and_learning_curve_defaults_are_their_sweep_files():
     gen, lc = _bench("generalization"), _bench("learning_curve")
-    _, shipped = sweep.load_sweep(BENCHES / "generalization.toml")
+    _, shipped = sweep_spec.load_sweep(BENCHES / "generalization.toml")
     for model in ("extended", "paper"):
-        _, mine = sweep.resolve(gen.sweep_doc(model, 100, 30, 24, 0), ROOT)
+        _, mine = sweep_spec.resolve(gen.sweep_doc(model, 100, 30, 24, 0), ROOT)
         assert sorted(c["id"] for c in mine) == sorted(c["id"] for c in shipped
                                                        if c["spec"]["condition"]["name"] == model)
         assert len(mine) == 130
-    _, shipped = sweep.load_sweep(BENCHES / "learning_curve.toml")
-    _, mine = sweep.resolve(lc.sweep_doc("extended", 20, 230, 0, (8, 16, 32, 64, 128, 230)), ROOT)
+    _, shipped = sweep_spec.load_sweep(BENCHES / "learning_curve.toml")
+    _, mine = sweep_spec.resolve(lc.sweep_doc("extended", 20, 230, 0, (8, 16, 32, 64, 128, 230)), ROOT)
     assert [c["id"] for c in mine] == [c["id"] for c in shipped] and len(mine) == 20
 
 
@@ -131,7 +133,7 @@ def test_a_tiny_generalization_run_prints_the_sweeps_figures(tmp_path, local_ray
     path.write_text(_toml(gen.sweep_doc("paper", 1, 1, 2, 3)))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
     capsys.readouterr()
-    rows = sweep.read_cells(tmp_path / "out").to_pylist()
+    rows = store.read_cells(tmp_path / "out").to_pylist()
     assert len(rows) == 2 * 8 + 2 * 24
     got = _last_line(lines)
     for n_train, key, equal_key in ((8, "median_error_8", "sequential_equals_batch"),
@@ -146,7 +148,7 @@ def test_a_tiny_generalization_run_prints_the_sweeps_figures(tmp_path, local_ray
     answer = next(r["batch_knowledge"] for r in rows if r["n_train"] == 8)
     assert any(f"batch answers: {answer} 1" in x for x in lines)
     # and train/report.py's CSV says the same
-    from train.report import report
+    from train.sweeps.report import report
     s = report(tmp_path / "out")
     assert s["errors"]["paper", "sets of 8"][8][1] == pytest.approx(got["median_error_8"], abs=5e-4)
 
@@ -160,7 +162,7 @@ def test_a_tiny_learning_curve_run_prints_the_sweeps_figures(tmp_path, local_ray
     path.write_text(_toml(lc.sweep_doc("extended", 2, 10, 3, (8, 10))))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
     capsys.readouterr()
-    rows = sweep.read_cells(tmp_path / "out").to_pylist()
+    rows = store.read_cells(tmp_path / "out").to_pylist()
     assert len(rows) == 2 * 10
     got = _last_line(lines)
     for n in (8, 10):

@@ -15,9 +15,9 @@ from pathlib import Path
 import pytest
 import torch
 
-from train import checkpoint as ck
+from train.learning import checkpoint as ck
 from train import run as runner
-from train.experiment import Experiment, closed_form_outcomes, load_experiment
+from train.learning.experiment import Experiment, closed_form_outcomes, load_experiment
 
 PAPER = {"train": [
     {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420},
@@ -69,8 +69,8 @@ class FakePhysics:
 
 @pytest.fixture
 def fake_physics(monkeypatch):
-    import train.physics
-    monkeypatch.setattr(train.physics, "Physics", FakePhysics)
+    import train.learning.sim_pool
+    monkeypatch.setattr(train.learning.sim_pool, "Physics", FakePhysics)
 
 
 @pytest.fixture(scope="module")

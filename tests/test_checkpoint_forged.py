@@ -13,9 +13,9 @@ import pytest
 import torch
 
 from test_checkpoint import FakePhysics, argv, fake_physics, paper_file, saved, tree, whole  # noqa: F401 fixtures
-from train import checkpoint as ck
+from train.learning import checkpoint as ck
 from train import run as runner
-from train.experiment import Experiment, closed_form_outcomes, load_experiment
+from train.learning.experiment import Experiment, closed_form_outcomes, load_experiment
 
 
 def write_forged(state: dict, f, sha256: str | None = None):
@@ -127,14 +127,14 @@ def _roll_back(s):
     (_fill("hub.branches", -1.0), "'hub.branches'"),
     (_fill("maps.size.locations", 3.0), "grid"),
     (_fill("memory.count", 10 ** 12), "'memory.count'"),
-    # the config, through the config's own validation (train.config, as --set would)
+    # the config, through the config's own validation (train.common.config, as --set would)
     (_set(("experiment", "config", "encoder", "mass_min_g"), 0.0), "encoder.mass_min_g takes a number (float) > 0"),
     (_set(("experiment", "config", "recall_sharpness"), math.nan), "recall_sharpness takes a finite number"),
     (_set(("experiment", "config", "rules", "certainty_step"), math.nan), "rules.certainty_step"),
     (_set(("experiment", "config", "hub", "n_neurons"), 10 ** 9), "hub.n_neurons"),
     (_set(("experiment", "config", "bogus"), 1), "unknown key bogus"),
     # a valid config whose agents would take 2 x 3 x (20 x 1000 + 1000) bytes, more than the file: refused before
-    # they are built (the largest sheet train.config.RANGES admits, 1000 columns)
+    # they are built (the largest sheet train.common.config.RANGES admits, 1000 columns)
     (lambda s: (s["experiment"]["config"]["memory"].update(cols=1000),
                 s["experiment"]["config"]["hub"].update(n_neurons=1000)),
      "config asks for agents of more than 126,000 bytes"),

@@ -9,7 +9,7 @@ import pytest
 
 from test_checkpoint import FakePhysics, argv, fake_physics, paper_file, saved, tree, whole  # noqa: F401 fixtures
 from test_checkpoint_forged import forged, refused, write_forged
-from train import checkpoint as ck
+from train.learning import checkpoint as ck
 from train import run as runner
 
 

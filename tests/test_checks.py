@@ -1,6 +1,6 @@
 """Nothing silent, nothing unbounded, no traceback from a config: settings that cannot work together are refused
-before anything is written (train/config_checks.py), a drop that measured nothing true ends the run in one line
-(train.experiment.check_outcome), and every JSON input is read bounded and strict (sim/input_files.py)."""
+before anything is written (train/runner/config_checks.py), a drop that measured nothing true ends the run in one line
+(train.learning.experiment.check_outcome), and every JSON input is read bounded and strict (sim/input_files.py)."""
 
 import json
 import math
@@ -15,8 +15,8 @@ import pytest
 
 from sim.input_files import InputFileError, loads, read_json
 from sim.objects import ObjectsFileError, load_objects
-from train.config import ConfigError, load_toml, resolve
-from train.config_checks import LEVERS_M, check_run
+from train.common.config import ConfigError, load_toml, resolve
+from train.runner.config_checks import LEVERS_M, check_run
 
 ROOT = Path(__file__).resolve().parents[1]
 DEFAULT = load_objects(ROOT / "sim" / "default_objects.json")
@@ -84,6 +84,102 @@ def test_settings_that_cannot_work_together_are_refused_naming_them(overrides, k
         assert w in str(e), str(e)
 
 
+@pytest.mark.parametrize("overrides, key, words", [
+    # the red-team's (issue 47): each ran, wrongly or into a late failure, or a traceback
+    ({"rules.eliminated_strength": 5, "rules.dominant_strength": 0.01}, "rules.eliminated_strength",
+     ["rules.eliminated_strength 5 is not <= retro_floor 0.1"]),
+    ({"encoder.context": ["width"]}, "encoder.context", ["['width']", "a jar run perceives no context"]),
+    ({"world.level_resolution_cm": 50}, "world.level_resolution_cm", ["steps of 50 cm", "0.124 cm rise",
+                                                                      "at most 0.0309 cm"]),
+    ({"world.min_felt_mass_g": 900}, "world.min_felt_mass_g", ["'red_light_cylinder'", "14 g", "at most 14 g"]),
+    ({"memory.cue_rows": [0]}, "memory.cue_rows", ["cues recall with its object hub", "got [0]"]),
+    # the rest of each class: strengths and tolerances in the wrong order
+    ({"rules.dominant_strength": 1.0}, "rules.dominant_strength", ["1 is not < rules.dominant_strength 1"]),
+    ({"rules.uncertain_floor": 0.05}, "rules.uncertain_floor", ["retro_floor 0.1 is not < rules.uncertain_floor"]),
+    ({"rules.uncertain_floor": 1.5}, "rules.uncertain_floor", ["rules.uncertain_floor 1.5 is not <= 1"]),
+    ({"retro_floor": 0.01}, "retro_floor", ["rules.eliminated_strength 0.05 is not <= retro_floor 0.01"]),
+    ({"rules.same_abs_cm3": 5}, "rules.same_abs_cm3", ["above rules.contradiction_abs_cm3 3"]),
+    ({"rules.same_rel": 0.5}, "rules.same_rel", ["above rules.contradiction_rel 0.2"]),
+    # the sheet's layout: a row's k that refuses the first episode stored, names on another map
+    ({"hub.assembly_size": 3}, "hub.assembly_size", ["row 1", "holds 3", "memory.row_k gives it 2"]),
+    ({"memory.row_k": [2] * 5 + [2] + [2] * 14}, "memory.row_k", ["row 5", "holds 1", "gives it 2"]),
+    ({"hub.word_map": "color"}, "hub.word_map", ["map 'word'"]),
+    # the world: gravity the water does not share, water that floats no ball, the arm's posture and links
+    ({"world.tank.water.gravity": 3}, "world.tank.water.gravity", ["is not world.tank.gravity 9.81"]),
+    ({"world.tank.gravity": 3}, "world.tank.gravity", ["world.tank.gravity 3 m/s^2"]),
+    ({"world.tank.water.density": 50}, "world.tank.water.density", ["cannot float the green ball"]),
+    ({"world.robot.home_arm": [9] * 10}, "world.robot.home_arm", ["torso_pitch=9 rad is outside"]),
+    ({"world.robot.colliding_links": ["nope"]}, "world.robot.colliding_links", ["'nope' is not a link of the iCub"]),
+])
+def test_settings_that_make_the_readings_or_the_knowledge_meaningless_are_refused(overrides, key, words):
+    e = refusal(overrides)
+    assert e.key == key and str(e).startswith(f"{key}: "), str(e)
+    for w in words:
+        assert w in str(e), str(e)
+
+
+@pytest.mark.parametrize("text, words", [
+    ("world.ik.seed=99999999999999999999", "world.ik.seed takes an integer (int) from 0 to 9,223,372,036,854,775,807"),
+    ("fate_recalls=99999999999999999999", "fate_recalls takes an integer (int) from 1 to 2000"),
+    ("memory.misses=-1", "memory.misses takes an integer (int) from 0 to 1000"),
+    ("hub.match_threshold=-5", "hub.match_threshold takes a number (float) from 0 to 1"),
+    ("goal_floor=5", "goal_floor takes a number (float) from 0 to 1"),
+    ("imagine_floor=0", "imagine_floor takes a number (float) from 0 to 1"),
+    ("rules.uncertain_decay=1.5", "rules.uncertain_decay takes a number (float) from 0 to 1"),
+    ("rules.contradiction_rel=1", "rules.contradiction_rel takes a number (float) from 0 to below 1"),
+    ("memory.threshold=5", "memory.threshold takes a number (float) from 0 to below 1"),
+    ("compare_with=0", "compare_with takes an integer (int) from 1 to 2000 or none"),
+    ("world.tank.gravity=0", "world.tank.gravity takes a number (float) > 0"),
+    ("world.tank.water.gravity=-9.81", "world.tank.water.gravity takes a number (float) > 0"),
+    ("world.tank.ball_rgb=[5, 0, 0]", "world.tank.ball_rgb takes an array of 3 numbers, each from 0 to 1"),
+    ("world.robot.arm_max_force=[0, 1, 1, 1, 1, 1, 1, 1, 1, 1]", "each > 0, got world.robot.arm_max_force[0] = 0.0"),
+])
+def test_a_value_out_of_its_meaning_is_refused_by_its_range(text, words):
+    from train.common.config import parse_set
+    key, value = parse_set(text)
+    with pytest.raises(ConfigError) as e:
+        resolve({key: value})
+    assert words in str(e.value) and e.value.key == key, str(e.value)
+
+
+def test_every_int_field_is_bounded_by_what_64_bits_hold():
+    """No int field of the agent or the world takes an integer a tensor or a generator would overflow on."""
+    from train.common.config import RunConfig, _leaves
+    c = RunConfig.default()
+    leaves = {**_leaves(c.agent), **{f"world.{k}": v for k, v in _leaves(c.world).items()}}
+    ints = [k for k, v in leaves.items() if isinstance(v, int) and not isinstance(v, bool)]
+    assert "world.ik.seed" in ints and "fate_recalls" in ints
+    for k in ints:
+        with pytest.raises(ConfigError):
+            resolve({k: 2 ** 63})
+
+
+def test_the_level_resolution_and_felt_mass_floor_bounds_by_hand():
+    """The smallest rise of the default file: 14 cm^3 over pi 6^2 cm^2, 0.1238 cm; a level read in steps of r
+    misreads it by up to r: refused above 0.1238 / 4 = 0.03095 cm. The felt-mass floor: at most the lightest
+    object's 14 g."""
+    bound = 14.0 / (math.pi * 36.0) / 4
+    check_run(resolve({"world.level_resolution_cm": bound * 0.99}), DEFAULT)
+    refusal({"world.level_resolution_cm": bound * 1.01})
+    check_run(resolve({"world.min_felt_mass_g": 14.0}), DEFAULT)
+    refusal({"world.min_felt_mass_g": 14.01})
+
+
+def test_in_lighter_water_archimedes_follows_and_an_overflow_is_refused():
+    """Archimedes' figure in water of 0.5 g/cm^3: a floater displaces twice its mass, a sinker its volume as
+    before; a 500 g float of 7 x 18 cm that fresh water holds 4.4 cm under the rim sinks there and overflows."""
+    from sim.objects import archimedes_cm3, parse_objects
+    light, heavy = DEFAULT.get("red_light_cylinder"), DEFAULT.get("red_heavy_cylinder")
+    assert archimedes_cm3(light, DEFAULT.jar, 0.5) == pytest.approx(28.0, rel=1e-9)
+    assert archimedes_cm3(heavy, DEFAULT.jar, 0.5) == archimedes_cm3(heavy, DEFAULT.jar)
+    check_run(resolve({"world.tank.water.density": 500}), DEFAULT)
+    big = parse_objects({"train": [{"name": "log", "shape": "cylinder", "color": "red", "dims_cm": [7.0, 18.0],
+                                    "mass_g": 500}]})
+    check_run(resolve({}), big)
+    e = refusal({"world.tank.water.density": 500}, big)
+    assert e.key == "world.tank.water.density" and "object 'log'" in str(e) and "over the jar's" in str(e), str(e)
+
+
 def test_the_level_noise_bound_is_the_smallest_rise_over_four_sigmas_of_a_difference():
     """The oracle by hand: 14 g afloat displaces 14 cm^3, over pi 6^2 cm^2 a rise of 0.1238 cm; a difference of two
     readings has noise sqrt(2) s: refused above 0.1238 / 4 / sqrt(2) = 0.02189 cm, taken below."""
@@ -104,7 +200,7 @@ def test_a_joint_refusal_names_the_setting_that_was_given():
 def test_the_arms_levers_bound_the_palms_speed():
     """LEVERS_M is a constant (the check must not import the kinematics); it is at least the URDF's."""
     from sim.kinematics import ArmKinematics
-    from train.config_checks import arm_levers
+    from train.runner.config_checks import arm_levers
     levers = arm_levers(ArmKinematics())
     assert 4.0 < levers <= LEVERS_M
 
@@ -116,7 +212,7 @@ def test_the_arms_levers_bound_the_palms_speed():
     ("world.waypoints=100000", "world.waypoints takes an integer (int) from 1 to 1000"),
 ])
 def test_every_amount_of_work_has_an_upper_bound(text, words):
-    from train.config import parse_set
+    from train.common.config import parse_set
     key, value = parse_set(text)
     with pytest.raises(ConfigError) as e:
         resolve({key: value})
@@ -159,7 +255,9 @@ def test_a_fuzz_of_in_range_settings_is_refused_in_one_line_or_passes():
 
 @pytest.mark.timeout(60)
 @pytest.mark.parametrize("sets", [["world.move_timeout_s=1e-9"], ["world.level_noise_cm=100"],
-                                  ["world.camera.far=0.001", "world.camera.near=10"]])
+                                  ["world.camera.far=0.001", "world.camera.near=10"],
+                                  ["hub.match_threshold=-5"], ["world.ik.seed=99999999999999999999"],
+                                  ["rules.dominant_strength=0.01", "rules.eliminated_strength=5"]])
 def test_the_runner_refuses_up_front_in_one_line_and_writes_nothing(tiny, tmp_path, capsys, sets):
     from train import run as runner
     out = tmp_path / "out"
@@ -200,8 +298,8 @@ def outcome(**kw):
     ({"observed_cm3": -11013.0}, "negative displaced volume (-11013.0 cm^3"),
 ])
 def test_an_outcome_that_is_no_measurement_is_never_recorded(kw, words):
-    from train.experiment import BadOutcome, outcome_record
-    from train.physics import WorldBuildError
+    from train.learning.experiment import BadOutcome, outcome_record
+    from sim.errors import WorldBuildError
     assert outcome_record(outcome())["observed_cm3"] == 365.0
     with pytest.raises(BadOutcome) as e:
         outcome_record(outcome(**kw))
@@ -219,7 +317,7 @@ def test_an_object_never_delivered_ends_the_run_in_one_line_with_its_checkpoint(
     assert r.returncode == 1 and len(lines) == 1, r.stderr
     assert "'red_heavy_cylinder' was not delivered into the jar" in lines[0] and "is intact" in lines[0]
     assert not (out / "summary.json").exists()
-    from train.checkpoint import load
+    from train.learning.checkpoint import load
     assert load(out / "checkpoints" / "latest.pt")["experiment"]["t"] == 0
 
 
@@ -309,7 +407,7 @@ def test_a_device_as_config_or_objects_is_one_line(tmp_path, capsys):
 # -- summary.json ------------------------------------------------------------------------------------------------
 
 def test_summary_json_has_null_for_non_finite_numbers():
-    from train.summary import json_safe
+    from train.runner.summary import json_safe
     data = json_safe({"a": [1.0, math.nan, (math.inf, -math.inf)], "b": {"c": "\x1b[31m"}, "d": 3})
     assert data == {"a": [1.0, None, [None, None]], "b": {"c": "\x1b[31m"}, "d": 3}
     text = json.dumps(data, allow_nan=False)

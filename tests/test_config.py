@@ -1,5 +1,5 @@
-"""train/config.py: one config for a run (the agent's and the world's), from a TOML file and --set, every refusal one
-line naming the key; and summary.json's commit and versions (train/summary.py). In-process: the runner's own
+"""train/common/config.py: one config for a run (the agent's and the world's), from a TOML file and --set, every refusal one
+line naming the key; and summary.json's commit and versions (train/runner/summary.py). In-process: the runner's own
 refusals and a full run are in tests/test_run_cli.py."""
 
 import json
@@ -13,7 +13,7 @@ import pytest
 from aesop_torch.agent import AgentConfig
 from sim.objects import parse_objects
 from sim.world import WorldConfig
-from train.config import (RANGES, ConfigError, RunConfig, apply_overrides, apply_world_overrides, check_world,
+from train.common.config import (RANGES, ConfigError, RunConfig, apply_overrides, apply_world_overrides, check_world,
                           config_dict, first_difference, flatten, load_toml, parse_set, resolve)
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -264,7 +264,7 @@ def test_flags_win_over_the_file_and_sets_apply_in_order(tmp_path):
 # -- summary.json's provenance -----------------------------------------------------------------------------------------
 
 def test_commit_is_unknown_outside_git(tmp_path, monkeypatch):
-    from train.summary import git_commit
+    from train.runner.summary import git_commit
     assert git_commit(tmp_path) == "unknown"
     monkeypatch.setenv("PATH", str(tmp_path))              # no git at all
     assert git_commit(ROOT) == "unknown"
@@ -273,7 +273,7 @@ def test_commit_is_unknown_outside_git(tmp_path, monkeypatch):
 
 @pytest.mark.skipif(shutil.which("git") is None or not (ROOT / ".git").exists(), reason="needs git and a checkout")
 def test_commit_describes_the_repository():
-    from train.summary import git_commit
+    from train.runner.summary import git_commit
     want = subprocess.run(["git", "describe", "--always", "--dirty"], cwd=ROOT, capture_output=True,
                           text=True).stdout.strip()
     assert git_commit() == want != "unknown"
@@ -283,7 +283,7 @@ def test_versions_of_the_libraries():
     import numpy
     import torch
 
-    from train.summary import versions
+    from train.runner.summary import versions
     v = versions()
     assert set(v) == {"torch", "pybullet", "numpy"} and all(isinstance(x, str) and x for x in v.values())
     assert v["torch"] == str(torch.__version__) and v["numpy"] == numpy.__version__ and v["pybullet"] != "unknown"

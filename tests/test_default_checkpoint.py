@@ -17,10 +17,11 @@ SHIPPED = ROOT / "checkpoints" / "default.pt"
 
 
 def test_the_shipped_default_checkpoint_is_what_a_fresh_default_run_writes(tmp_path):
-    from train import run, run_loop
-    from train.config import first_difference
-    from train.experiment import load_experiment, outcome_record
-    from train.physics import Physics
+    from train import run
+    from train.runner import loop as run_loop
+    from train.common.config import first_difference
+    from train.learning.experiment import load_experiment, outcome_record
+    from train.learning.sim_pool import Physics
 
     stored = torch.load(SHIPPED, weights_only=True)
     shipped = load_experiment(SHIPPED)

@@ -169,3 +169,18 @@ def test_encoder_config_ranges_are_used():
     enc = SensoryEncoder(EncoderConfig(mass_min_g=10.0, mass_max_g=1000.0))
     w = enc({"mass_g": torch.tensor([10.0, 100.0, 1000.0])})["weight"][:, 0]
     assert w.tolist() == pytest.approx([0.0, 0.5, 1.0], abs=1e-6)
+
+
+def test_size_is_read_from_the_volume_or_from_the_largest_extent_as_configured():
+    """A 2 x 2 x 16 cm rod and a 4 cm cube have one bounding-box volume (64 cm^3): the same size read as its cube
+    root (the default), the rod 4x larger read as the largest extent (EncoderConfig.size_from "largest")."""
+    from aesop_torch.encoders import EncoderConfig, SensoryEncoder
+    m = {"rgb": torch.tensor([[0.5] * 3] * 2), "extent_cm": torch.tensor([[16.0, 2.0, 2.0], [4.0, 4.0, 4.0]]),
+         "fill": torch.tensor([1.0, 1.0]), "mass_g": torch.tensor([50.0, 50.0])}
+    unit = math.log(30.0)   # size_min_cm 1 .. size_max_cm 30
+    root = SensoryEncoder(EncoderConfig())(m)["size"][:, 0]
+    assert torch.allclose(root, torch.tensor([math.log(4.0) / unit] * 2))
+    largest = SensoryEncoder(EncoderConfig(size_from="largest"))(m)["size"][:, 0]
+    assert torch.allclose(largest, torch.tensor([math.log(16.0) / unit, math.log(4.0) / unit]))
+    with pytest.raises(ValueError, match="size_from must be one of cube_root, largest"):
+        EncoderConfig(size_from="mean")

@@ -7,8 +7,8 @@ import numpy as np
 from matplotlib.collections import PolyCollection
 
 from aesop_torch.rules import PROPERTIES, STATES
-from train.experiment import senses_floor
-from train.figures import MAX_CURVES, STATE_LETTERS, figure2, knowledge_arrays, save_figure2
+from train.learning.experiment import senses_floor
+from train.runner.figures import MAX_CURVES, STATE_LETTERS, figure2, knowledge_arrays, save_figure2
 
 CERT = {"unknown": 0.0, "likely_irrelevant": 0.3, "dominant": 1.0, "irrelevant": 1.0}
 

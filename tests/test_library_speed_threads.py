@@ -9,7 +9,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from train.experiment import load_experiment, one_thread
+from train.learning.experiment import load_experiment, one_thread
 
 CKPT = Path(__file__).resolve().parents[1] / "checkpoints" / "default.pt"
 
@@ -49,9 +49,9 @@ def test_predict_and_probe_predictions_run_on_one_thread(two_threads, monkeypatc
 
 
 def test_checkpoint_and_experiment_import_no_cycle():
-    """train.checkpoint verifies a checkpoint (agents built from its config included) without train.experiment,
+    """train.learning.checkpoint verifies a checkpoint (agents built from its config included) without train.learning.experiment,
     which imports it."""
-    code = "import sys; from train.checkpoint import load; load(sys.argv[1]); print('train.experiment' in sys.modules)"
+    code = "import sys; from train.learning.checkpoint import load; load(sys.argv[1]); print('train.learning.experiment' in sys.modules)"
     r = subprocess.run([sys.executable, "-c", code, str(CKPT)], capture_output=True, text=True, timeout=120,
                        cwd=CKPT.parents[1])
     assert r.returncode == 0 and r.stdout.strip() == "False", r.stderr

@@ -456,7 +456,7 @@ def test_a_life_of_40_generated_objects_in_a_memory_of_16(maps, policy):
     from sim.make_objects import generate
     from sim.objects import parse_objects
     from sim.sensor_model import SensorModel
-    from train.experiment import closed_form_outcomes, stack_measurements
+    from train.learning.experiment import closed_form_outcomes, stack_measurements
 
     objs = parse_objects(generate(0, 40, 8, pairs=True))
     outcomes, probes = closed_form_outcomes(objs, sensor=SensorModel(), seed=0)

@@ -69,7 +69,7 @@ def test_the_runner_refuses_a_life_its_memory_or_hub_cannot_hold_before_writing_
 
 def test_check_capacity_counts_train_objects_against_a_refusing_memory_and_hub():
     from aesop_torch.agent import AgentConfig
-    from train.run import check_capacity
+    from train.common.models import check_capacity
     cfg = AgentConfig()
     assert check_capacity(cfg, 230) is None
     both = check_capacity(cfg, 231)   # both refuse: one line names both, and the fix for both

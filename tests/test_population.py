@@ -1,4 +1,4 @@
-"""train.population: every order at once (prefix sharing, shared recall) gives what Experiment gives order by order.
+"""train.learning.population: every order at once (prefix sharing, shared recall) gives what Experiment gives order by order.
 
 Closed-form outcomes (Archimedes, no physics), as a cached-physics run would record them.
 """
@@ -13,10 +13,10 @@ import torch
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, MemoryConfig
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects
-from train.experiment import Experiment, closed_form_outcomes, draw_orders, median_rel_error
-from train.population import (RecallCache, SharedRecallMemory, _owned, _row_keys, agreement, canonicalise,
+from train.learning.experiment import Experiment, closed_form_outcomes, draw_orders, median_rel_error
+from train.learning.population import (RecallCache, SharedRecallMemory, _owned, _row_keys, agreement, canonicalise,
                               median_rel_errors, run_population)
-from train.summary import knowledge_key
+from train.runner.summary import knowledge_key
 
 # five of the default objects whose 120 orders agree on their knowledge but end with different sets of probe
 # predictions (which episodes were encoded, and so recalled, differs from order to order), so agreement between the
@@ -332,8 +332,8 @@ def test_curves_give_every_orders_error_after_every_episode(world):
     computed directly. The plain trie (every node stepped, no copied subtrees) counts the same."""
     import numpy as np
 
-    from train.figures import ERROR_BANDS, error_bands
-    from train.quantiles import weighted_quantiles
+    from train.runner.figures import ERROR_BANDS, error_bands
+    from train.common.quantiles import weighted_quantiles
 
     _, probe_names, outcomes, probes = world
     names, n = list(FOUR), len(FOUR)

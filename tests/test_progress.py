@@ -2,7 +2,7 @@
 
 import io
 
-from train.progress import Step
+from train.common.progress import Step
 
 
 class Terminal(io.StringIO):

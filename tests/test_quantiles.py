@@ -1,9 +1,9 @@
-"""train.quantiles.weighted_quantiles: numpy's linear quantile of the values repeated by their counts."""
+"""train.common.quantiles.weighted_quantiles: numpy's linear quantile of the values repeated by their counts."""
 
 import numpy as np
 import pytest
 
-from train.quantiles import weighted_quantiles
+from train.common.quantiles import weighted_quantiles
 
 
 def test_hand_computed_quantiles_of_counted_values():

@@ -131,7 +131,7 @@ def test_tensorboard_tags_and_values(paper_run):
 
 
 def test_checkpoint_loads_weights_only_and_predicts_for_a_new_object(paper_run):
-    from train.experiment import load_experiment
+    from train.learning.experiment import load_experiment
     out, summary, _ = paper_run
     state = torch.load(out / "checkpoints" / "latest.pt", weights_only=True)
     assert state["experiment"]["t"] == 3
@@ -174,7 +174,7 @@ def test_killed_run_resumes_to_the_same_summary(paper_file, tmp_path):
 
 
 def test_shipped_default_checkpoint_predicts_as_the_readme_says():
-    from train.experiment import load_experiment
+    from train.learning.experiment import load_experiment
     path = ROOT / "checkpoints" / "default.pt"
     assert torch.load(path, weights_only=True)["run"]["orders_arg"] == "4"
     exp = load_experiment(path)
@@ -193,8 +193,8 @@ def test_more_orders_than_full_records_run_as_a_population(paper_file, tmp_path)
                        capture_output=True, text=True, timeout=300)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
-    from train.experiment import draw_orders
-    from train.summary import FULL_RUNS, knowledge_key
+    from train.learning.experiment import draw_orders
+    from train.runner.summary import FULL_RUNS, knowledge_key
     orders = draw_orders(3, "70", seed=0)
     names = [o["name"] for o in PAPER["train"]]
     # the first FULL_RUNS orders in full detail, every order in the compact block
@@ -229,7 +229,7 @@ def test_an_object_in_the_files_schema_is_predicted_as_its_measurement(tmp_path,
     exactly) as it takes a measurement, refuses what the file would refuse, and train/ask.py --objects predicts a
     whole file against Archimedes."""
     from sim.objects import ObjectsFileError, parse_object
-    from train.experiment import load_experiment
+    from train.learning.experiment import load_experiment
     exp = load_experiment(ROOT / "checkpoints" / "default.pt")
     spec = {"shape": "cylinder", "color": [0.1, 0.7, 0.2], "dims_cm": [6.36, 11.5], "mass_g": 420}
     assert torch.equal(exp.predict(spec), exp.predict(parse_object(spec).exact_measurement()))
@@ -258,8 +258,8 @@ def test_summary_says_what_the_extended_knowledge_rests_on():
     set) and its confounded properties reach summary.json and the console's table."""
     from aesop_torch.agent import AgentConfig
     from sim.objects import load_objects
-    from train.experiment import Experiment, closed_form_outcomes
-    from train.summary import build_summary, knowledge_table
+    from train.learning.experiment import Experiment, closed_form_outcomes
+    from train.runner.summary import build_summary, knowledge_table
     objects = load_objects(ROOT / "sim" / "default_objects.json")
     outcomes, probes = closed_form_outcomes(objects)
     exp = Experiment([o.name for o in objects.train], [], [list(range(len(objects.train)))],

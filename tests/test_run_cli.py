@@ -318,7 +318,7 @@ def test_help_states_the_configs_order():
 
 
 def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
-    from train.summary import git_commit
+    from train.runner.summary import git_commit
     objects = tmp_path / "objects.json"
     objects.write_text(json.dumps({"train": [GOOD, obj(name="blue", color="blue")]}))
     cfg = tmp_path / "c.toml"
@@ -372,10 +372,11 @@ def test_a_lock_that_is_not_a_regular_file_is_refused_without_touching_anything(
 
 
 def test_the_runners_tables_of_models_and_ablations_are_the_agents():
-    """train/run.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported."""
-    import train.run as runner
+    """train/common/models.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported
+    (the runner's and the sweeps' one table)."""
     from aesop_torch.agent import ABLATIONS, MODELS
-    assert runner.MODELS == MODELS and runner.ABLATIONS == ABLATIONS
+    from train.common import models
+    assert models.MODELS == MODELS and models.ABLATIONS == ABLATIONS
 
 
 # -- what the other commands say, and the console commands ------------------------------------------------------------
@@ -394,7 +395,7 @@ def test_ask_names_the_objects_file_it_refuses(tmp_path, capsys):
 def test_a_task_runs_score_says_when_too_few_trials_can_pass():
     """One-sided binomial test at chance 0.5: n of n correct gives p = 0.5 ** n, below 0.05 from n = 5 on; with 2
     trials (p = 0.25 at best) or 4 (0.0625) no score passes, and the line says so instead of "fail"."""
-    from train.task_run import verdict
+    from train.battery.task_run import verdict
     assert verdict(False, 2, 0.5) == verdict(False, 4, 0.5) == " (too few trials to pass at 0.05)"
     assert verdict(False, 5, 0.5) == " -> fail" and verdict(True, 5, 0.5) == " -> pass"
     assert verdict(False, 3, 1 / 3) == " -> fail"    # (1/3) ** 3 = 0.037: 3 of 3 would pass
@@ -438,3 +439,50 @@ def test_the_console_command_puts_the_repository_on_the_path_itself(tmp_path):
     r = subprocess.run([sys.executable, "-I", "-c", code, str(ROOT / "aesop_torch" / "cli.py")], cwd=tmp_path,
                        capture_output=True, text=True, timeout=60)
     assert r.returncode == 0 and "usage: train/run.py" in r.stdout, r.stderr
+
+
+# -- the help and the resume messages (issue 47) ---------------------------------------------------------------------
+
+def test_the_help_lists_every_model_and_every_ablation_from_the_tables(capsys):
+    """--help is built from the tables (train/runner/settings.py), so a model or a part added is in it: each with
+    its line, and a part that not every model has says which do."""
+    from train import run as runner
+    from train.common.models import ABLATION_HELP, ABLATIONS, MODEL_HELP, MODELS
+    with pytest.raises(SystemExit):
+        runner.parse_args(["--help"])
+    text = "".join(capsys.readouterr().out.split())   # argparse wraps lines (and breaks at hyphens)
+    said = lambda t: "".join(t.split()) in text   # noqa: E731
+    parts = {p for m in MODELS for p in ABLATIONS[m]}
+    assert set(MODEL_HELP) >= set(MODELS) and set(ABLATION_HELP) >= parts, "a model or a part without its help line"
+    for m in MODELS:
+        assert said(f"{m}: {MODEL_HELP[m]}"), m
+    assert said("fit (contextual only: " + ABLATION_HELP["fit"]) and said("prior (extended only: ")
+    assert said("rules (" + ABLATION_HELP["rules"])   # every model has it: no "only"
+
+
+def test_resume_of_a_contextual_run_takes_its_own_ablation(tmp_path):
+    """The run's model comes from its run.json: --ablate fit, a part of the contextual model, agrees with a
+    contextual run's (it was refused as 'not a part of the paper model', the default, before run.json was read)."""
+    from train import run as runner
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "run.json").write_text(json.dumps({"objects": {}, "orders": "1", "physics": "cached", "overrides": {
+        "model": "contextual", "ablate": ["fit"], "seed": 0}}))
+    a = runner.parse_args(["--resume", "--out", str(out), "--ablate", "fit"])
+    assert (a.model, a.ablate) == ("contextual", ["fit"])
+
+
+def test_resume_without_a_checkpoint_says_to_start_again_without_it(tmp_path, capsys):
+    from sim.objects import parse_objects
+    from train import run as runner
+    out = tmp_path / "out"
+    out.mkdir()
+    objects = parse_objects({"train": [GOOD]})
+    (out / "run.json").write_text(json.dumps({"objects": objects.canonical(), "orders": "1", "physics": "cached",
+                                              "overrides": {"model": "paper", "ablate": [], "seed": 0}}))
+    assert runner.main(["--resume", "--out", str(out)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "no checkpoint at" in err[0] and "start it again without --resume" in err[0], err
+    assert runner.main(["--resume", "--out", str(tmp_path / "none")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "start the run without --resume" in err[0], err

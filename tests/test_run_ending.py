@@ -125,7 +125,7 @@ def test_a_pool_whose_idle_process_was_killed_still_ends():
     # the idle process of the figure's pool holds the task queue's lock while it waits: Pool.terminate, waiting on that
     # lock, hung for ever once it was killed (and so did a Ctrl-C after it)
     code = ("import os, signal\n"
-            "from train.drawing import Drawer\n"
+            "from train.runner.figure_process import Drawer\n"
             "d = Drawer()\n"
             "pid = d.draw('os:getpid').get()\n"
             "os.kill(pid, signal.SIGKILL)\n"
@@ -183,7 +183,7 @@ def test_a_pool_whose_dead_process_the_pool_thread_saw_still_ends():
     # (never a new process) in its place, which Pool.join then waited on: AttributeError, the tests' pool closed badly
     import time
 
-    from train.physics import QuietPool, end_pool, quiet_pool
+    from train.learning.sim_pool import QuietPool, end_pool, quiet_pool
     pool = quiet_pool(2, None, what="a test worker")
     try:
         victim = pool.processes[0]
@@ -272,7 +272,7 @@ def test_a_pool_dropped_with_a_killed_idle_process_does_not_hang_in_its_finalise
     # the pool's finaliser (run when the pool is dropped, or at exit) waited for ever on the task queue's lock, which
     # the killed idle process held: a runner ended by a signal while it ended its pools hung so after its one line
     code = ("import gc, os, signal, time\n"
-            "from train.physics import quiet_pool\n"
+            "from train.learning.sim_pool import quiet_pool\n"
             "pool = quiet_pool(1, None)\n"
             "pid = pool.apply_async(os.getpid).get(10)\n"
             "time.sleep(0.2)\n"   # back at its wait for the next job, holding the task queue's lock
@@ -289,7 +289,7 @@ def test_signals_held_defers_a_signal_to_the_end_of_the_block_and_raises_it_once
     # Ctrl-C's handler first: a shell's background job starts with SIGINT ignored, and Python then installs none
     code = ("import os, signal\n"
             "signal.signal(signal.SIGINT, signal.default_int_handler)\n"
-            "from train.endings import Ended, ending_signals, signals_held\n"
+            "from train.common.exits import Ended, ending_signals, signals_held\n"
             "with ending_signals():\n"
             "    try:\n"
             "        with signals_held():\n"
@@ -308,3 +308,69 @@ def test_signals_held_defers_a_signal_to_the_end_of_the_block_and_raises_it_once
     r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
     assert r.returncode == 0 and r.stdout.split("\n") == ["inside", "raised True", "inside", "raised KeyboardInterrupt",
                                                           "after", ""], (r.stdout, r.stderr)
+
+
+# -- a signal during an import, or before main(): deferred to where the runner can say its line ----------------------
+
+def test_a_signal_during_an_import_takes_effect_when_the_import_is_done(tmp_path):
+    # pybullet's C import of numpy turns an exception raised inside it into "ImportError: numpy._core.multiarray failed
+    # to import" (a traceback 0.2-0.55 s into a run), and an `except ImportError` would swallow it (the signal lost):
+    # `convert` does what that C code does, `victim` is the import the signal lands in
+    (tmp_path / "victim.py").write_text("import os, signal\nos.kill(os.getpid(), signal.SIGTERM)\nDONE = True\n")
+    (tmp_path / "convert.py").write_text("try:\n    import victim\nexcept BaseException:\n"
+                                         "    raise ImportError('failed to import') from None\n")
+    code = ("import sys\n"
+            f"sys.path.insert(0, {str(tmp_path)!r})\n"
+            "from train.common.exits import Ended, ending_signals\n"
+            "import time\n"
+            "with ending_signals():\n"
+            "    try:\n"
+            "        import convert\n"
+            "        time.sleep(5)\n"   # the signal is raised once the import is done: here, within 20 ms
+            "        print('lost')\n"
+            "    except ImportError:\n"
+            "        print('swallowed')\n"
+            "    except Ended as e:\n"
+            "        print('ended', e.signum, sys.modules['victim'].DONE)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout == f"ended {int(signal.SIGTERM)} True\n", (r.stdout, r.stderr)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT, signal.SIGHUP])
+def test_a_signal_before_main_ends_the_run_in_one_line_and_writes_nothing(tmp_path, sig):
+    # from the script's first line to main() (its imports: 0.1-0.5 s) a signal is recorded and main() says it
+    out = tmp_path / "out"
+    code = ("import os, signal, sys\n"
+            "from train.common import exits\n"
+            "exits.early_signals()\n"
+            f"os.kill(os.getpid(), {int(sig)})\n"
+            "import argparse, json\n"   # a signal here raised inside the import: recorded instead
+            "from train.run import main\n"
+            f"sys.exit(main(['--out', {str(out)!r}]))\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60,
+                       preexec_fn=lambda: [signal.signal(s, signal.SIG_DFL)
+                                           for s in (signal.SIGINT, signal.SIGTERM, signal.SIGHUP)])
+    by = "" if sig == signal.SIGINT else f" by {signal.Signals(sig).name}"
+    assert r.returncode == 128 + sig and r.stderr == f"train/run.py: interrupted{by} before the run started\n", \
+        (r.returncode, r.stderr)
+    assert not out.exists()
+
+
+def test_a_signal_held_during_an_import_waits_for_a_block_that_holds_signals(tmp_path):
+    """Raised once its import is done, but not inside a block that signals must not cut (signals_held: a pool's
+    start or end), which the code may enter before the held signal's retry comes."""
+    (tmp_path / "victim.py").write_text("import os, signal\nos.kill(os.getpid(), signal.SIGTERM)\n")
+    code = ("import sys, time\n"
+            f"sys.path.insert(0, {str(tmp_path)!r})\n"
+            "from train.common.exits import Ended, ending_signals, signals_held\n"
+            "with ending_signals():\n"
+            "    try:\n"
+            "        import victim\n"
+            "        with signals_held():\n"
+            "            time.sleep(0.3)\n"   # the retry comes 20 ms after the import: held until the block ends
+            "            print('held', flush=True)\n"
+            "        time.sleep(5)\n"
+            "    except Ended as e:\n"
+            "        print('ended', e.signum, flush=True)\n")
+    r = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=30)
+    assert r.returncode == 0 and r.stdout == f"held\nended {int(signal.SIGTERM)}\n", (r.stdout, r.stderr)

@@ -7,14 +7,14 @@ import torch
 
 from aesop_torch.agent import AgentConfig
 from sim.objects import DEFAULT_OBJECTS_FILE, load_objects
-from train.experiment import (
+from train.learning.experiment import (
     Experiment,
     closed_form_outcomes,
     draw_orders,
     stack_measurements,
 )
-from train.physics import Physics
-from train.population import run_orders, run_population
+from train.learning.sim_pool import Physics
+from train.learning.population import run_orders, run_population
 
 THREE = ("red_heavy_cylinder", "red_light_cylinder", "green_heavy_box")
 
@@ -75,7 +75,7 @@ def test_jobs_submitted_early_are_taken_up_by_the_same_jobs_submit():
 def test_figure_2_encoded_once_writes_what_add_image_writes(tmp_path):
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    from train.tensorboard_log import OrderLog
+    from train.runner.tensorboard_log import OrderLog
     image = (torch.arange(6 * 5 * 3) % 251).to(torch.uint8).view(6, 5, 3).numpy()
     plain, once = OrderLog(tmp_path / "plain"), OrderLog(tmp_path / "once")
     plain.image("figure2", image, 8)

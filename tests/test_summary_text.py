@@ -1,11 +1,11 @@
-"""summary.json's text: train.summary.summary_text writes what json.dumps(summary, indent=1) writes, faster."""
+"""summary.json's text: train.runner.summary.summary_text writes what json.dumps(summary, indent=1) writes, faster."""
 
 import json
 import math
 
 import pytest
 
-from train.summary import summary_text
+from train.runner.summary import summary_text
 
 
 def summary(keys, errors, **more):

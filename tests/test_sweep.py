@@ -12,8 +12,13 @@ import pytest
 
 from train import report as report_mod
 from train import sweep
+from train.common import models
+from train.sweeps import cell as sweep_cell
+from train.sweeps import provenance, store
+from train.sweeps import spec as sweep_spec
 
 ROOT = Path(__file__).resolve().parents[1]
+CLEAN = "0123abc"   # the commit the tests' cells are written at (clean_commit)
 
 TINY = """
 description = "2 conditions x 2 generated sets of 4 objects x 2 orders"
@@ -34,6 +39,13 @@ checks = [1, 3, 4]
 """
 
 
+@pytest.fixture(autouse=True)
+def clean_commit(monkeypatch):
+    """This checkout taken for a clean commit, CLEAN: a developer's uncommitted changes would make every --resume
+    here refuse (that refusal has its own tests, which give the commits)."""
+    monkeypatch.setattr(provenance, "commit", lambda: CLEAN)
+
+
 def _write(tmp_path: Path, text: str, name: str = "sweep.toml") -> Path:
     p = tmp_path / name
     p.write_text(text)
@@ -46,8 +58,8 @@ def _sorted(table):
 
 def _direct(path: Path):
     """The sweep's cells run here, in this process, without Ray."""
-    _, cells = sweep.load_sweep(path)
-    return _sorted(pa.concat_tables([sweep.run_cell(c["spec"], c["objects"]) for c in cells]))
+    _, cells = sweep_spec.load_sweep(path)
+    return _sorted(pa.concat_tables([sweep_cell.run_cell(c["spec"], c["objects"]) for c in cells]))
 
 
 def test_a_sweep_on_ray_gives_the_rows_of_its_cells_run_in_process(tmp_path, local_ray, capsys):
@@ -56,8 +68,8 @@ def test_a_sweep_on_ray_gives_the_rows_of_its_cells_run_in_process(tmp_path, loc
     out = tmp_path / "out"
     files = sorted((out / "cells").glob("*"))
     assert len(files) == 4 and all(f.suffix == ".parquet" for f in files)   # no temporary file left
-    got = _sorted(sweep.read_cells(out))
-    assert got.schema == sweep.schema()
+    got = _sorted(store.read_cells(out))
+    assert got.schema == sweep_cell.schema()
     assert got.num_rows == 2 * 2 * 2 * 4                                  # conditions x sets x orders x episodes
     assert got.equals(_direct(path))                                     # bit for bit
     rows = got.to_pylist()
@@ -75,6 +87,22 @@ def test_a_sweep_on_ray_gives_the_rows_of_its_cells_run_in_process(tmp_path, loc
     capsys.readouterr()
     assert sweep.main([str(path), "--out", str(out), "--resume"]) == 0
     assert "4 on disk, 0 to run" in capsys.readouterr().out
+    # every row names the code that made it; the report starts with it, the versions, the dates and the commands
+    assert set(got.column("commit").to_pylist()) == {CLEAN}
+    assert report_mod.main([str(out)]) == 0
+    runs = json.loads((out / "sweep.json").read_text())["runs"]
+    info = [store.cell_info(f) for f in files]
+    versions = ", ".join(f"{k} {info[0]['versions'][k]}" for k in ("python", "torch", "numpy", "pybullet", "pyarrow",
+                                                                     "ray"))
+    about = [f"commit: {CLEAN}", f"versions: {versions}",
+             f"date: {min(i['started'] for i in info)} to {max(i['ended'] for i in info)} (UTC, the cells' first start "
+             f"to last end)",
+             f"command: `train/sweep.py {path} --out {out}` ; then `train/sweep.py {path} --out {out} --resume`"]
+    assert [r["command"] for r in runs] == [f"train/sweep.py {path} --out {out}",
+                                           f"train/sweep.py {path} --out {out} --resume"]
+    assert (out / "report.csv").read_text().splitlines()[:4] == [f"# {line}" for line in about]
+    assert (out / "report.md").read_text().splitlines()[2:6] == [f"- {line}" for line in about]
+    assert versions.startswith(f"python {sys.version.split()[0]}, torch ")
 
 
 def test_an_interrupted_sweep_resumes_to_the_same_table(tmp_path, local_ray, capsys):
@@ -101,7 +129,7 @@ def test_an_interrupted_sweep_resumes_to_the_same_table(tmp_path, local_ray, cap
     assert sweep.main([str(path), "--out", str(out), "--resume"]) == 0
     assert "2 on disk, 2 to run" in capsys.readouterr().out
     assert {p.name: p.stat().st_mtime_ns for p in (out / "cells").glob("*.parquet") if p.name in first} == first
-    assert _sorted(sweep.read_cells(out)).equals(_direct(path))
+    assert _sorted(store.read_cells(out)).equals(_direct(path))
 
 
 def test_ctrl_c_ends_a_sweep_in_one_line_with_its_finished_cells_on_disk(tmp_path):
@@ -129,7 +157,7 @@ def test_ctrl_c_ends_a_sweep_in_one_line_with_its_finished_cells_on_disk(tmp_pat
                                                f"{out / 'cells'} (--resume runs the rest)")
     assert 1 <= len(done) < 80 and "Traceback" not in stderr
     assert sorted(p.name for p in (out / "cells").iterdir()) == sorted(p.name for p in done)   # no half file
-    assert sweep.read_cells(out).num_rows == len(done) * 2 * 4
+    assert store.read_cells(out).num_rows == len(done) * 2 * 4
 
 
 BAD = {
@@ -179,14 +207,14 @@ def test_a_physics_world_is_simulated_once_and_shared_by_the_conditions(tmp_path
                         'seeds = [5, 6], train = 4, probe = 1, pairs = false, jar = "default"')
     path = _write(tmp_path, 'world = "physics"\n' + text.replace("orders = 2", "orders = 1"))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 0
-    got = _sorted(sweep.read_cells(tmp_path / "out"))
+    got = _sorted(store.read_cells(tmp_path / "out"))
     assert got.num_rows == 2 * 4 and set(got.column("world").to_pylist()) == {"physics"}
     by = {}
     for r in got.to_pylist():
         by.setdefault(r["condition"], {})[r["object"]] = r["observed_cm3"]
     assert by["paper"] == by["extended -prior"]                       # one world for both conditions
-    _, cells = sweep.load_sweep(path)
-    direct = sweep.run_cell(cells[0]["spec"], cells[0]["objects"])    # simulated again, here: the same outcomes
+    _, cells = sweep_spec.load_sweep(path)
+    direct = sweep_cell.run_cell(cells[0]["spec"], cells[0]["objects"])    # simulated again, here: the same outcomes
     assert {o: v for o, v in zip(direct.column("object").to_pylist(), direct.column("observed_cm3").to_pylist())} \
         == by[cells[0]["spec"]["condition"]["name"]]
 
@@ -200,17 +228,17 @@ overrides = { rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8 }
 
 
 def test_overrides_reach_the_agent_and_the_rows(tmp_path):
-    pytest.importorskip("train.config")
-    spec, cells = sweep.load_sweep(_write(tmp_path, OVERRIDDEN))
+    pytest.importorskip("train.common.config")
+    spec, cells = sweep_spec.load_sweep(_write(tmp_path, OVERRIDDEN))
     cond = spec["conditions"][2]
     assert cond["overrides"] == {"recall_sharpness": 8, "rules.uncertain_decay": 1.0}   # nested or dotted: one form
-    cfg = sweep.agent_config(cond, 5, 4)
+    cfg = sweep_spec.agent_config(cond, 5, 4)
     assert (cfg.rules.uncertain_decay, cfg.recall_sharpness, cfg.seed, cfg.memory.max_episodes) == (1.0, 8, 5, 4)
     # the buffers are sized to the set first, so an override may size them otherwise
-    cfg = sweep.agent_config({**cond, "overrides": {"memory.max_episodes": 2}}, 5, 4)
+    cfg = sweep_spec.agent_config({**cond, "overrides": {"memory.max_episodes": 2}}, 5, 4)
     assert cfg.memory.max_episodes == 2 and cfg.hub.max_assemblies == 4
     cell = next(c for c in cells if c["spec"]["condition"]["name"] == "paper, no decay")
-    table = sweep.run_cell(cell["spec"], cell["objects"])
+    table = sweep_cell.run_cell(cell["spec"], cell["objects"])
     assert set(table.column("overrides").to_pylist()) == {'{"recall_sharpness": 8, "rules.uncertain_decay": 1.0}'}
     assert set(table.column("cell").to_pylist()) == {cell["id"]}
 
@@ -223,7 +251,7 @@ def test_overrides_reach_the_agent_and_the_rows(tmp_path):
     ('model = "extended"', "overrides: 'model' is set by the condition's model"),
 ])
 def test_a_bad_override_is_refused_in_one_line(tmp_path, capsys, override, words):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     path = _write(tmp_path, OVERRIDDEN.replace('rules = { uncertain_decay = 1.0 }, "recall_sharpness" = 8', override))
     assert sweep.main([str(path), "--out", str(tmp_path / "out")]) == 2
     lines = capsys.readouterr().err.strip().splitlines()
@@ -246,18 +274,18 @@ orders = 2
 
 @pytest.mark.parametrize("policy", ["forget_oldest", "forget_weakest"])
 def test_eight_objects_through_a_memory_and_hub_of_four_run_to_the_end(tmp_path, policy):
-    pytest.importorskip("train.config")
-    _, (cell,) = sweep.load_sweep(_write(tmp_path, SMALL_MEMORY.replace("POLICY", policy)))
-    cfg = sweep.agent_config(cell["spec"]["condition"], 3, 8)
+    pytest.importorskip("train.common.config")
+    _, (cell,) = sweep_spec.load_sweep(_write(tmp_path, SMALL_MEMORY.replace("POLICY", policy)))
+    cfg = sweep_spec.agent_config(cell["spec"]["condition"], 3, 8)
     assert (cfg.memory.max_episodes, cfg.hub.max_assemblies, cfg.memory.when_full) == (4, 4, policy)
-    rows = sweep.run_cell(cell["spec"], cell["objects"]).to_pylist()
+    rows = sweep_cell.run_cell(cell["spec"], cell["objects"]).to_pylist()
     assert [(r["order"], r["episode"]) for r in rows] == [(o, e) for o in range(2) for e in range(1, 9)]
     assert all(r["probe_rel_error"] is not None for r in rows)   # predicted to the end, past the fifth object
 
 
 @pytest.mark.parametrize("part", ["memory", "hub"])
 def test_a_refusing_memory_or_hub_too_small_for_the_set_is_refused_before_anything_is_written(tmp_path, capsys, part):
-    pytest.importorskip("train.config")
+    pytest.importorskip("train.common.config")
     other = {"memory": "hub", "hub": "memory"}[part]
     text = SMALL_MEMORY.replace(f'"{part}.when_full" = "POLICY"', f'"{part}.when_full" = "refuse"')
     path = _write(tmp_path, text.replace("POLICY", "forget_oldest"))
@@ -284,17 +312,18 @@ def test_the_runner_refuses_eight_objects_through_a_refusing_memory_of_four_in_o
 
 
 def test_cells_are_named_by_a_stable_hash_of_their_spec(tmp_path):
-    _, cells = sweep.load_sweep(_write(tmp_path, TINY))
+    _, cells = sweep_spec.load_sweep(_write(tmp_path, TINY))
     assert len({c["id"] for c in cells}) == 4
-    spec = {"format": 3, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
+    spec = {"format": 4, "world": "closed_form", "condition": {"name": "paper", "model": "paper", "ablate": [],
                                                                 "overrides": {}},
             "set_group": "fours", "set": "5", "source": {"generate": {"seed": 5, "train": 4, "probe": 3,
                                                                       "pairs": False, "jar": "random"}},
             "n_train": 4, "n_probe": 3, "seed": 5, "orders": "2", "checks": [1, 3, 4]}
     assert spec in [c["spec"] for c in cells]
     # fixed: a resumed sweep finds the cells an older run wrote (format 1's rows, without the batch answer, memory
-    # and per-probe columns, were "adf20a285d537c59"; format 2's, without the config column, "0d2ac7d39c86682e")
-    assert sweep.cell_id(spec) == "3ef18f6bc10cafcd"
+    # and per-probe columns, were "adf20a285d537c59"; format 2's, without the config column, "0d2ac7d39c86682e";
+    # format 3's, without the commit column, "3ef18f6bc10cafcd")
+    assert sweep_cell.cell_id(spec) == "457d4a6853e97c5a"
 
 
 def _hand_made_table():
@@ -307,13 +336,15 @@ def _hand_made_table():
                 for ep in (1, 2):
                     k = finals[c][o] if ep == 2 else "UUUU"
                     rows.append({"cell": f"{cond}{c}", "condition": cond, "model": "paper", "ablate": "",
-                                 "overrides": "{}", "world": "closed_form", "set_group": "g", "set": str(c),
+                                 "overrides": "{}", "commit": "abc1234", "world": "closed_form", "set_group": "g",
+                                 "set": str(c),
                                  "generator_seed": c, "seed": c, "n_train": 2, "n_probe": 3, "n_orders": 2,
                                  "order": o, "episode": ep, "object": f"t{ep}", "predicted_cm3": None,
                                  "observed_cm3": 1.0, "archimedes_cm3": 1.0, "sank": False, "goal_reached": False,
                                  "rules": "SSSS", "knowledge": k, "color": k[0], "shape": k[1], "size": k[2],
-                                 "weight": k[3], "probe_rel_error": errs[2 * c + o] if ep == 2 else None})
-    return pa.Table.from_pylist(rows, schema=sweep.schema())
+                                 "weight": k[3], "stored": ep,
+                                 "probe_rel_error": errs[2 * c + o] if ep == 2 else None})
+    return pa.Table.from_pylist(rows, schema=sweep_cell.schema())
 
 
 def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_table(tmp_path, capsys):
@@ -321,21 +352,24 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
     (tmp_path / "cells").mkdir()
     for cell in ("a0", "a1", "b0", "b1"):
         import pyarrow.compute as pc
-        sweep.write_cell(tmp_path, cell, table.filter(pc.equal(table.column("cell"), cell)))
+        store.write_cell(tmp_path, cell, table.filter(pc.equal(table.column("cell"), cell)))
     assert report_mod.main([str(tmp_path)]) == 0
     csv = (tmp_path / "report.csv").read_text().splitlines()
-    # per condition: the median of its 4 runs, a 95 % interval from resampling its 2 sets (a: sets of 0.1, 0.2 and
-    # 0.3, 0.4 give medians 0.15, 0.25, 0.35, each drawn pair of sets a quarter of the time or more: 15-35 %), the
-    # runs' 25-75 % range, and the knowledge shares; b learned nothing: its 100 % agreement is marked
-    assert csv == ["condition,set_group,episode,sets,runs,error_median_pct,error_ci95_lo_pct,error_ci95_hi_pct,"
-                   "error_q25_pct,error_q75_pct,floor_pct,over_floor_pct,probes_over_2pts,stored,recalled,runs_fell,"
+    # the rows' commit first; per condition: the median of its 4 runs, no 95 % interval over its 2 sets (a bootstrap
+    # of 2 sets has 3 distinct resamples: "n too small" stands in its place), the runs' 25-75 % range, and the
+    # knowledge shares; b learned nothing: its 100 % agreement is marked
+    assert csv[0] == "# commit: abc1234" and len(csv) == 7
+    assert csv[4:] == ["condition,set_group,episode,sets,runs,error_median_pct,error_ci95_lo_pct,error_ci95_hi_pct,"
+                   "error_ci95_note,error_q25_pct,error_q75_pct,floor_pct,over_floor_pct,probes_over_2pts,stored,recalled,runs_fell,"
                    "runs_rose,change_median_pct,cells,cell_sets,cell_runs,order_agreement_pct,nothing_learned,"
                    "colour_irrelevant_pct,weight_dominant_pct,equals_batch_pct",
-                   "a,g,2,2,4,25.0000,15.0000,35.0000,17.5000,32.5000,,,,,,,,,2,2,4,50.00,no,75.00,100.00,",
-                   "b,g,2,2,4,250.0000,150.0000,400.0000,175.0000,350.0000,,,,,,,,,2,2,4,100.00,yes,0.00,0.00,"]
+                   "a,g,2,2,4,25.0000,,,n too small: 2 sets (a 95 % interval needs 10),17.5000,32.5000,,,,,,,,,2,2,4,"
+                   "50.00,no,75.00,100.00,",
+                   "b,g,2,2,4,250.0000,,,n too small: 2 sets (a 95 % interval needs 10),175.0000,350.0000,,,,,,,,,2,2,4,"
+                   "100.00,yes,0.00,0.00,"]
     md = (tmp_path / "report.md").read_text()
     assert "| condition | sets | runs | after 2 episodes |" in md
-    assert "| a | 2 | 4 | 25.0 % [15.0-35.0] |" in md and "| b | 2 | 4 | 250.0 % [150.0-400.0] |" in md
+    assert "| a | 2 | 4 | 25.0 % (n too small: 2 sets) |" in md and "| b | 2 | 4 | 250.0 % (n too small: 2 sets) |" in md
     assert "| a | g | 2 | 2 | 4 | 50.0 % | 75.0 % |" in md and "| b | g | 2 | 2 | 4 | 100.0 % (nothing learned) |" in md
     for png in ("errors.png", "agreement.png"):
         data = (tmp_path / png).read_bytes()
@@ -349,11 +383,29 @@ def test_the_report_writes_the_medians_iqr_agreement_and_plots_of_a_hand_made_ta
 def test_the_constants_kept_without_torch_are_the_agents():
     from aesop_torch.agent import ABLATIONS, MODELS
     from aesop_torch.encoders import OBJECT_PROPERTIES
-    from aesop_torch.rules import RULE_NAMES
-    from train.summary import KNOWLEDGE_LETTERS
-    assert sweep.MODELS == MODELS and sweep.ABLATIONS == ABLATIONS
-    assert sweep.PROPERTY_COLUMNS == OBJECT_PROPERTIES and sweep.RULE_LETTERS == "".join(RULE_NAMES)
-    assert sweep.KNOWLEDGE_LETTERS == KNOWLEDGE_LETTERS
+    from aesop_torch.rules import KNOWLEDGE_LETTERS, RULE_NAMES, STATES
+    assert models.MODELS == MODELS and models.ABLATIONS == ABLATIONS
+    assert sweep_cell.PROPERTY_COLUMNS == OBJECT_PROPERTIES and sweep_cell.RULE_LETTERS == "".join(RULE_NAMES)
+    assert sweep_cell.STATE_LETTERS == KNOWLEDGE_LETTERS
+    assert len(set(KNOWLEDGE_LETTERS)) == len(KNOWLEDGE_LETTERS) == len(STATES)   # one letter per state, one table
+
+
+def test_the_docs_name_every_model_and_ablation_and_the_usage_the_command_typed(capsys):
+    """docs/sweeps.md's model and ablate rows and the example's comment follow the tables (they said "paper or
+    extended" after the contextual model came); each usage line names what a person types."""
+    text = (ROOT / "docs" / "sweeps.md").read_text()
+    rows = {line.split("|")[1].strip(): line for line in text.splitlines() if line.startswith("| `conditions[].")}
+    assert all(f"`{m}`" in rows["`conditions[].model`"] for m in models.MODELS)
+    assert all(f"`{a}`" in rows["`conditions[].ablate`"] for m in models.MODELS for a in models.ABLATIONS[m])
+    assert all(f'"{m}"' in next(x for x in text.splitlines() if "# required: " in x and "model =" in x)
+               for m in models.MODELS)
+    from aesop_torch import cli
+    for call, usage in ((lambda: cli.sweep(["--help"]), "usage: aesop-sweep "),
+                        (lambda: sweep.main(["--help"]), "usage: python train/sweep.py ")):
+        with pytest.raises(SystemExit):
+            call()
+        out = capsys.readouterr().out
+        assert out.startswith(usage) and "--allow-mixed-commits" in out and out.rstrip().endswith("aesop-report DIR.")
 
 
 def test_the_example_in_docs_and_the_shipped_sweep_files_load():
@@ -361,15 +413,15 @@ def test_the_example_in_docs_and_the_shipped_sweep_files_load():
     text = (ROOT / "docs" / "sweeps.md").read_text()
     doc = tomllib.loads(text.split("```toml\n")[1].split("```")[0])
     try:
-        import train.config  # noqa: F401
-    except ModuleNotFoundError:   # overrides need train/config.py
+        import train.common.config  # noqa: F401
+    except ModuleNotFoundError:   # overrides need train/common/config.py
         for c in doc["conditions"]:
             c.pop("overrides", None)
-    spec, cells = sweep._resolve(doc, ROOT / "docs")
+    spec, cells = sweep_spec.resolve(doc, ROOT / "docs")
     assert [c["name"] for c in spec["conditions"]] == ["paper", "paper -rules", "paper, no uncertainty decay"]
     assert len(cells) == 3 * (10 + 4)
     for f in ("examples/tiny.toml", "examples/ablation.toml", "benches/ablation.toml", "benches/generalization.toml",
               "benches/learning_curve.toml"):
-        assert sweep.load_sweep(ROOT / f)[1]
-    _, cells = sweep.load_sweep(ROOT / "benches" / "ablation.toml")
+        assert sweep_spec.load_sweep(ROOT / f)[1]
+    _, cells = sweep_spec.load_sweep(ROOT / "benches" / "ablation.toml")
     assert len(cells) == 11 * (30 + 10 + 8)   # paper, contextual and extended with their ablations

@@ -10,8 +10,8 @@ from pathlib import Path
 import pytest
 
 from sim.apparatus import load_task, outcome
-from train.battery import WIDTH_RANGE_CM
-from train.task_run import PhysicsWorld, look
+from train.battery.tasks import WIDTH_RANGE_CM
+from train.battery.task_run import PhysicsWorld, look
 
 ROOT = Path(__file__).resolve().parents[1]
 TASKS = ROOT / "sim" / "tasks"

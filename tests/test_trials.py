@@ -12,8 +12,8 @@ from aesop_torch import Agent, AgentConfig
 from sim.objects import ObjectsFileError, archimedes_cm3, load_objects, parse_objects
 from sim.trial import (closed_form_drop, drops_to_goal, fewest_drops, optimal_first, random_drops_mean, reach_cm3,
                        reach_rise_cm)
-from train.experiment import Experiment, closed_form_outcomes, stack_measurements
-from train.trials import choose, needed_cm3, roomy_copy, run_trials
+from train.learning.experiment import Experiment, closed_form_outcomes, stack_measurements
+from train.learning.goal_trials import choose, needed_cm3, roomy_copy, run_trials
 
 JAR = {"inner_diameter_cm": 12.0, "height_cm": 19.5, "water_depth_cm": 14.0}
 CYL = {"shape": "cylinder", "dims_cm": [6.36, 11.5]}
@@ -128,7 +128,7 @@ def test_a_novice_explores_and_water_accumulates_to_the_goal(explored):
 
 
 def test_planner_sequences_by_hand():
-    from train.trials import planner_sequences
+    from train.learning.goal_trials import planner_sequences
     # the ball needs 237 cm^3. [30 g float (30), 400 g sinker (365)]: one drop, nothing to simulate ahead.
     # [14 g float (14), box (180), 30 g float (30)]: 224 < 237, so the planner drops all three, the largest first
     objs = parse_objects({**OBJECTS, "trials": [{"stand": ["blue_light_cylinder", "blue_heavy_cylinder"]},
@@ -160,7 +160,7 @@ class _ClosedFormPhysics:
 def test_a_sequence_simulated_ahead_is_taken_not_simulated_again(explored):
     """The runner simulates the planner's sequences while its workers would idle: an agent that drops one (or a part
     of one) takes its outcomes from there, and every record is as if it had been simulated when asked."""
-    from train.trials import planner_sequences, play_trials
+    from train.learning.goal_trials import planner_sequences, play_trials
     exp, _, outcomes = explored
     objs = parse_objects({**OBJECTS, "trials": [{"stand": ["red_light_cylinder", "green_heavy_box",
                                                            "blue_light_cylinder"]}]})
@@ -218,9 +218,9 @@ def test_physics_water_is_not_reset_between_the_drops_of_a_trial():
 def test_trials_play_the_same_on_the_worker_pool_as_in_this_process(explored):
     """The runner simulates the trials' drops on its worker pool, and takes a trial's first drop of an object it
     dropped in the exploration from there: the same outcomes, bit for bit, as simulating them here."""
-    from train.experiment import outcome_record
-    from train.physics import Physics
-    from train.trials import TRIAL_OUTCOME_KEYS, outcome_dict, play_trials
+    from train.learning.experiment import outcome_record
+    from train.learning.sim_pool import Physics
+    from train.learning.goal_trials import TRIAL_OUTCOME_KEYS, outcome_dict, play_trials
     exp, objs, _ = explored
     here = play_trials(exp, objs, Physics(objs, seed=0, workers=1))   # the pool objects inspected, then dropped
     assert here[0][0]["chosen"] == ["blue_heavy_cylinder"] and here[0][0]["goal_reached"]
@@ -402,8 +402,8 @@ def test_a_goal_trial_drop_not_delivered_or_negative_is_never_kept():
     volume read, ends the run (BadOutcome) instead of entering the trial's records."""
     from types import SimpleNamespace
 
-    from train.experiment import BadOutcome
-    from train.trials import outcome_dict
+    from train.learning.experiment import BadOutcome
+    from train.learning.goal_trials import outcome_dict
     ok = dict(observed_cm3=10.0, goal_reachable_before=False, goal_reached_after=False, sank=True,
               measurement={"rgb": [0.5, 0.5, 0.5], "extent_cm": [3.0, 3.0, 3.0], "fill": 1.0, "mass_g": 50.0})
     assert outcome_dict(SimpleNamespace(**ok))["observed_cm3"] == 10.0

@@ -12,7 +12,7 @@ import pytest
 from sim.episode import EpisodeOutcome, FrameRecorder, _rests_on_bottom, _take, save_frames_png
 from sim.objects import (DEFAULT_OBJECTS_FILE, JarSpec, ObjectsConfig, ObjectSpec, load_objects, min_mass_g_for,
                          parse_objects)
-from sim.water import CM, TankConfig
+from sim.water import CM, TankConfig, WaterConfig
 from sim.world import World, WorldConfig
 
 NOISE_G = 1.0
@@ -321,7 +321,7 @@ def test_an_episode_that_fails_in_a_non_default_world_is_one_error_naming_it():
     what it raises (a bug there keeps its traceback)."""
     from dataclasses import replace
 
-    from train.physics import WorldBuildError
+    from sim.errors import WorldBuildError
     config = WorldConfig(camera=replace(WorldConfig().camera, min_pixels=10 ** 6))
     w = World(load_objects(DEFAULT_OBJECTS_FILE), config, seed=0)
     try:
@@ -333,3 +333,18 @@ def test_an_episode_that_fails_in_a_non_default_world_is_one_error_naming_it():
             w.inspect("unicorn")
     finally:
         w.close()
+
+
+def test_in_water_of_another_density_archimedes_figure_follows_it():
+    """Half as dense water: a 30 g disc (6 x 3 cm, upright afloat in either water) displaces 30 / 0.5 = 60 cm^3, and
+    both the simulated water and the figure the run compares with say so (the figure once stayed at fresh water's
+    30 cm^3). A tall float would tip over in it and lean on the wall (sim/objects.py: outside the closed form)."""
+    disc = parse_objects({"train": [{"name": "disc", "shape": "cylinder", "color": "blue", "dims_cm": [6.0, 3.0],
+                                     "mass_g": 30}]})
+    w = World(disc, WorldConfig(tank=TankConfig(water=WaterConfig(density=500.0))), seed=0)
+    try:
+        out = w.run_episode("disc")
+    finally:
+        w.close()
+    assert out.archimedes_cm3 == pytest.approx(60.0, rel=1e-9) and not out.sank
+    assert out.observed_cm3 == pytest.approx(60.0, rel=0.02)

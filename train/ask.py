@@ -38,8 +38,8 @@ def main(argv=None) -> int:
         return 2
     path = argv[0]
     from sim.objects import ObjectsFileError, load_objects
-    from train.checkpoint import CheckpointError
-    from train.experiment import load_experiment
+    from train.learning.checkpoint import CheckpointError
+    from train.learning.experiment import load_experiment
     if not Path(path).is_file():
         print(f"train/ask.py: error: no checkpoint file at {path}", file=sys.stderr)
         return 2

@@ -2,10 +2,10 @@
 
     python train/run.py [--objects FILE] [--orders N|listed|all] [--seed S] [--out DIR] [--resume]
                         [--config FILE.toml] [--set KEY=VALUE ...]
-                        [--model paper|extended] [--ablate rules|gating|prior ...]
-                        [--physics cached|per-episode] [--frames] [--gui]
+                        [--model paper|contextual|extended] [--ablate PART ...]
+                        [--explore teacher|active] [--physics cached|per-episode] [--frames] [--gui]
 
-The model's and the world's config (train/config.py): the defaults, then the --config file, then each --set in
+The model's and the world's config (train/common/config.py): the defaults, then the --config file, then each --set in
 order, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed): a later value wins, so a
 flag wins over the file.
 
@@ -19,24 +19,32 @@ intact and --resume continues. A closed stdout (`>&-`): the run goes on without 
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
-import time
-from pathlib import Path
 
 if __package__ in (None, ""):  # run as a script: make the project importable without installing it
-    sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.realpath(__file__))))
+
+# Signals first: from here on a Ctrl-C, SIGTERM or SIGHUP waits for main() to say its one line (exits.early_signals)
+from train.common import exits  # noqa: E402
+
+if __name__ == "__main__":
+    exits.early_signals()
+
+import argparse  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 # Only light imports up here: torch takes about a second to import; everything the first line needs is checked
-# without it. The parts: train/run_config.py (the settings and the config), train/out_dir.py (--out, its lock),
-# train/endings.py (signals, the one line, exit codes), train/run_loop.py (the run itself).
-from train.endings import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
-                           sigint_ignored)
-from train.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.run_config import (ABLATIONS, DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS, MODELS,  # noqa: E402, F401
-                              adopt_run, check_capacity, count_orders, gather_config, load_objects_or_fail,
-                              load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
+# without it. The parts: train/runner/settings.py (the settings and the config), train/runner/out_dir.py (--out, its lock),
+# train/common/exits.py (signals, the one line, exit codes), train/runner/loop.py (the run itself).
+from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
+                                raise_pending, sigint_ignored)
+from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
+from train.common.models import ABLATION_HELP, ABLATIONS, MODEL_HELP, MODELS, check_capacity  # noqa: E402
+from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
+                                   adopt_run, count_orders, gather_config, load_objects_or_fail,
+                                   load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
 DEFAULT_OUT = "runs/run-<date-time>"
 
@@ -63,6 +71,23 @@ keys model, ablate and seed): when the file and a flag both give a value, the fl
 the wrong type or out of range: one line, exit 2, nothing written. CONTRACTS.md has the details."""
 
 
+def model_help() -> str:
+    """--model's help from the tables (train/common/models.py MODELS, MODEL_HELP): every model, so none is left out."""
+    return "; ".join(f"{m}: {MODEL_HELP.get(m, 'see CONTRACTS.md')}" for m in MODELS) + \
+        " (default: paper, or the config's model)"
+
+
+def ablate_help() -> str:
+    """--ablate's help from the tables (ABLATIONS, ABLATION_HELP): each part, and the models that have it."""
+    parts = list(dict.fromkeys(p for m in MODELS for p in ABLATIONS[m]))
+    said = []
+    for part in parts:
+        having = [m for m in MODELS if part in ABLATIONS[m]]
+        only = "" if len(having) == len(MODELS) else f"{', '.join(having)} only: "
+        said.append(f"{part} ({only}{ABLATION_HELP.get(part, 'see CONTRACTS.md')})")
+    return "switch a part off (repeatable; replaces the config's ablate): " + ", ".join(said)
+
+
 def parse_args(argv):
     ap = Parser(prog="train/run.py", description=__doc__.split("\n")[0], formatter_class=Formatter,
                 epilog=CONFIG_HELP)
@@ -85,14 +110,12 @@ def parse_args(argv):
                     help="set one config key (repeatable, applied after --config, in order), e.g. "
                          "rules.uncertain_decay=1.0, memory.max_recalls=none, model=extended, world.mass_noise_g=5, "
                          "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
-    ap.add_argument("--model", choices=MODELS, default=None,
-                    help="paper: the paper's mechanism (incremental rules, knowledge-gated recall, a weighted average "
-                         "of recalled rewards); extended: evidence-set rules with contexts and a readout fitted with "
-                         "the task's physics priors (default: paper, or the config's model)")
-    ap.add_argument("--ablate", action="append", default=None, metavar="PART",
-                    help="switch a part off (repeatable; replaces the config's ablate): rules (no rule fires), gating "
-                         "(the memory's cue ignores the strengths), prior (extended only: the readout without its "
-                         "physics priors)")
+    ap.add_argument("--model", choices=MODELS, default=None, help=model_help())
+    ap.add_argument("--ablate", action="append", default=None, metavar="PART", help=ablate_help())
+    ap.add_argument("--explore", choices=("teacher", "active"), default=None,
+                    help="who chooses the next object: teacher (the order given) or active (the robot: the object "
+                         "on the stand whose comparison with a remembered episode would be cleanest for what is "
+                         "still unknown; cached physics only) (default: teacher, or the config's explore)")
     ap.add_argument("--physics", choices=("cached", "per-episode"), default=None,
                     help="simulate each distinct object once (cached) or every episode of every order (default: "
                          "cached)")
@@ -125,10 +148,11 @@ def main(argv=None) -> int:
 
 
 def _main(argv=None) -> int:
-    from train import run_loop
-
+    run_loop = None
     ran = None   # the run's exit code once it has returned
     try:
+        raise_pending()   # a signal that came before main() (early_signals)
+        from train.runner import loop as run_loop
         try:
             args = parse_args(sys.argv[1:] if argv is None else argv)
             if args.objects is not None and _is_task_file(args.objects):
@@ -145,7 +169,7 @@ def _main(argv=None) -> int:
             print(f"train/run.py: {'resuming' if args.resume else 'starting'} {n_orders:,} order(s) of "
                   f"{len(objects.train)} object(s), physics {args.physics}, seed {args.seed} -> {args.out}",
                   flush=True)
-            from train.physics import Physics
+            from train.learning.sim_pool import Physics
             run_loop._OPEN["physics"] = physics = Physics(objects, seed=args.seed, gui=args.gui,
                                                           **world_kw(args))   # forked in prepare
             exp, resumed, lock = run_loop.prepare(args, objects, n_orders, physics)
@@ -165,20 +189,21 @@ def _main(argv=None) -> int:
     except KeyboardInterrupt as e:
         by, code = how(e)
         with sigint_ignored():
-            run_loop.close_quietly()
+            if run_loop is not None:
+                run_loop.close_quietly()
             when = "before the run started" if ran is None else f"as the run ended (exit code {ran} otherwise)"
             print(f"{fresh_line()}train/run.py: interrupted{by} {when}", file=sys.stderr)
         return code
 
 
 def _is_task_file(path: Path) -> bool:
-    from train.task_run import is_task_file
+    from train.battery.task_run import is_task_file
     return is_task_file(path)
 
 
 def run_task(args) -> int:
     """--objects is a task file of the Aesop battery (sim/tasks/): --orders N agents of --seed explore and play it in
-    the apparatus built in pybullet (train/task_run.py). It has no checkpoints: an interrupted task run starts again."""
+    the apparatus built in pybullet (train/battery/task_run.py). It has no checkpoints: an interrupted task run starts again."""
     given = [flag for flag, on in (("--resume", args.resume), ("--config/--set", args.overrides.keys() -
                                                                      {"model", "ablate", "seed"}),
                                    ("--gui", args.gui), ("--physics per-episode", args.physics != "cached")) if on]
@@ -197,7 +222,7 @@ def run_task(args) -> int:
           f"physics in pybullet -> {args.out}", flush=True)
     lock = lock_out(args.out)
     try:
-        from train.task_run import run_task_file
+        from train.battery.task_run import run_task_file
         try:
             run_task_file(task, args.out, args.model, args.seed, int(args.orders), tuple(args.ablate), args.frames)
         except OSError as e:
@@ -214,5 +239,12 @@ def run_task(args) -> int:
         os.close(lock)
 
 
+def console_main() -> None:
+    """`python train/run.py` and the console command aesop-run: the run, then its exit without the interpreter's
+    teardown (everything is written and closed; train/common/exits.py exit_now)."""
+    exits.early_signals()   # aesop-run's (the script's already, before its imports)
+    exit_now(main())
+
+
 if __name__ == "__main__":
-    exit_now(main())   # everything is written and closed: spare the interpreter's teardown (train/endings.py)
+    console_main()

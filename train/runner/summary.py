@@ -6,7 +6,7 @@ knowledge (one letter per property: U unknown, L likely irrelevant, D dominant, 
 and the fraction of orders that agree with the most common final knowledge. `order_independent` is always computed
 over every order (null for a single order, where it is undefined).
 
-`config` is the run's whole config in the layout `--config` reads (train/config.py): the agents' as the experiment
+`config` is the run's whole config in the layout `--config` reads (train/common/config.py): the agents' as the experiment
 ran it and the world's; `commit` names the code (`git describe --always --dirty` in the repository, or "unknown"),
 `versions` the libraries that computed it.
 """
@@ -22,19 +22,15 @@ import sys
 from pathlib import Path
 
 from aesop_torch.encoders import object_properties
-from aesop_torch.rules import STATES
+from aesop_torch.rules import KNOWLEDGE_LETTERS, STATES
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 GIT_TIMEOUT_S = 5.0
 # a git environment that points elsewhere would describe another repository
 GIT_REDIRECTS = ("GIT_DIR", "GIT_WORK_TREE", "GIT_INDEX_FILE", "GIT_COMMON_DIR", "GIT_OBJECT_DIRECTORY")
 VERSIONED = ("torch", "pybullet", "numpy")
 
 FULL_RUNS = 64  # 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB
-
-
-KNOWLEDGE_LETTERS = "ULDI"   # one letter per rules.STATES code, in its order
-assert len(KNOWLEDGE_LETTERS) == len(STATES)
 
 
 def knowledge_key(k: dict) -> str:
@@ -72,12 +68,12 @@ def versions() -> dict:
 
 
 def build_summary(exp, population: dict | None = None, config: dict | None = None) -> dict:
-    """exp: the Experiment run in detail (at most FULL_RUNS orders); population: train.population's result for
-    every order when there are more; config: the run's config as train.config.config_dict gives it (None: the
+    """exp: the Experiment run in detail (at most FULL_RUNS orders); population: train.learning.population's result for
+    every order when there are more; config: the run's config as train.common.config.config_dict gives it (None: the
     experiment's agents with the default world)."""
     if config is None:
         from sim.world import WorldConfig
-        from train.config import RunConfig, config_dict
+        from train.common.config import RunConfig, config_dict
         config = config_dict(RunConfig(exp.config, WorldConfig()))
     names = exp.train_names
     finals = exp.final_knowledge()

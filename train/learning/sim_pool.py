@@ -32,7 +32,7 @@ would wait for ever. Every wait on a pool's result looks at its processes every 
 naming the process, when one has died. A pool ends whatever state its dead processes left its locks in, however it
 ends (`end_pool`, or its finaliser when it is dropped or the interpreter exits): its processes are killed and its
 locks freed first. Starting and ending a pool hold Ctrl-C, SIGTERM and SIGHUP until they are done
-(train/endings.py signals_held): a pool cut off halfway would leave idle processes holding its task queue's lock.
+(train/common/exits.py signals_held): a pool cut off halfway would leave idle processes holding its task queue's lock.
 """
 
 from __future__ import annotations
@@ -47,16 +47,13 @@ import signal
 import sys
 import threading
 
-from train.endings import signals_held
+from sim.errors import WorldBuildError
+from train.common.exits import signals_held
 
 _WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
 START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
 WATCH_S = 0.25   # how often a wait on a pool looks whether its processes are alive
 PR_SET_PDEATHSIG = 1   # linux/prctl.h
-
-
-class WorldBuildError(RuntimeError):
-    """A worker could not build its world (a world config the scene does not admit); the message is one line."""
 
 
 class WorkerDied(RuntimeError):
@@ -103,7 +100,7 @@ def _simulate(world, job: tuple):
 
 def by_name(target: str, args: tuple):
     """target(*args) for target "module:function", its module imported by the process that runs it (the runner's
-    drawer draws Figure 2 so, train/drawing.py: the runner never imports matplotlib)."""
+    drawer draws Figure 2 so, train/runner/figure_process.py: the runner never imports matplotlib)."""
     module, name = target.split(":")
     return getattr(importlib.import_module(module), name)(*args)
 

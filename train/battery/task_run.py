@@ -1,13 +1,13 @@
 """One task of the Aesop battery with physics: `train/run.py --objects sim/tasks/<task>.json`.
 
 The task's tubes are built in pybullet (sim/tubes.py) and seen from the camera (sim.perception.perceive_tube): each
-tube's width, level and the look of what fills it become the agent's context properties, as train/battery.py's
+tube's width, level and the look of what fills it become the agent's context properties, as train/battery/tasks.py's
 agents have them, but measured from images instead of read from the file. Every (tube, object) option, and every
 exploration drop, is simulated from the task's starting levels (each trial is set up afresh, as in the studies), and
 its reward tube's rise is measured from the simulation. pybullet is deterministic, so each distinct drop is simulated
 once and its measured outcome replayed on every trial that repeats it. Then `--orders` naive subjects of `--seed`,
 pre-trained on stones in a jar-like tube (the closed form's: the pre-training is no part of the task), meet the task
-on trial 1 and play its 20 trials, its tubes mirrored on half of them (train.battery.run_task).
+on trial 1 and play its 20 trials, its tubes mirrored on half of them (train.battery.tasks.run_task).
 
 Writes into --out: summary.json (the perceived tubes, each option's simulated and closed-form rise, every agent's
 choices, the scores), tb/ (per trial: the share of agents choosing right, the mean rise they got) and, with
@@ -22,7 +22,7 @@ import time
 from pathlib import Path
 
 REWARD_TRIALS_TAG = "battery"
-PASS_P = 0.05   # train/battery.py Score.passed: p below it passes (said in the verdict)
+PASS_P = 0.05   # train/battery/tasks.py Score.passed: p below it passes (said in the verdict)
 
 
 def is_task_file(path) -> bool:
@@ -73,14 +73,14 @@ class PhysicsWorld:
 
     def measurement(self, task, tube, obj) -> dict:
         """An option as the agent perceives it: the object's measurement and the tube's context from the camera."""
-        from train.battery import WIDTH_RANGE_CM
-        from train.battery import reward_gap_cm
+        from train.battery.tasks import WIDTH_RANGE_CM
+        from train.battery.tasks import reward_gap_cm
         m = dict(obj.exact_measurement())
         m["gap_cm"] = reward_gap_cm(task, tube, {k: v["level_cm"] for k, v in self.seen.items()})
         s = self.seen[tube.name]
         lo, hi = WIDTH_RANGE_CM
         d = min(max(s["width_cm"], lo), hi)
-        names = [t.name for t in task.tubes]   # the task as laid out on this trial (train.battery.mirrored)
+        names = [t.name for t in task.tubes]   # the task as laid out on this trial (train.battery.tasks.mirrored)
         m["context"] = {"surface": look(s["substrate_rgb"]),
                         "width": (math.log(d) - math.log(lo)) / (math.log(hi) - math.log(lo)),
                         "level": min(max(s["level_cm"] / tube.height_cm, 0.0), 1.0),   # the rim is the workspace's
@@ -143,8 +143,8 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
                   log=print) -> dict:
     """Run one task (sim.apparatus.Task) with physics into `out` (a directory this run owns); returns the summary."""
     from sim.apparatus import outcome
-    from train.battery import run_task
-    from train.checkpoint import write_text_atomic
+    from train.battery.tasks import run_task
+    from train.learning.checkpoint import write_text_atomic
 
     t0 = time.time()
     world = PhysicsWorld(task, out / "frames" if frames else None)
@@ -180,7 +180,7 @@ def run_task_file(task, out: Path, model: str, seed: int, orders: int, ablate=()
 def verdict(passed: bool, n: int, chance: float) -> str:
     """What a score's p-value says: " -> pass", " -> fail", or, when even n correct of n would not pass (2 trials at
     chance 0.5 give p = 0.25 at best), that the test cannot pass on so few trials: not a failure of the agents."""
-    from train.battery import Score
+    from train.battery.tasks import Score
 
     if passed:
         return " -> pass"

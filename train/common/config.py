@@ -6,7 +6,7 @@ A key is a dotted path of dataclass fields, the same everywhere (`--set`, the TO
 * the agent's config, `aesop_torch.agent.AgentConfig`: its own fields at the top level (`recall_sharpness`,
   `compare_with`, `model`, `ablate`, `seed`, ...) and its parts by name (`encoder.`, `hub.`, `memory.`, `rules.`);
 * the world's config under `world.`: `sim.world.WorldConfig`, the pybullet scene every physics worker of the runner
-  builds (`World(objects, config, seed)`, train/physics.py), with its parts `world.tank.` (`sim.water.TankConfig`:
+  builds (`World(objects, config, seed)`, train/learning/sim_pool.py), with its parts `world.tank.` (`sim.water.TankConfig`:
   jar, ball, stepping), `world.tank.water.` (`WaterConfig`), `world.robot.` (`sim.robot.RobotConfig`), `world.ik.`
   (`sim.kinematics.IKConfig`) and `world.camera.` (`sim.perception.CameraConfig`); e.g. `world.mass_noise_g`, the
   wrist's noise on the felt mass. The runner builds no other world config: `sim.sensor_model.SensorModel` serves
@@ -88,7 +88,7 @@ RANGES = {
     # a memory and a hub hold at most the objects of one life (sim.objects.ObjectsConfig.max_objects, 2000), and an
     # episode is compared with at most the episodes they hold
     "hub.n_neurons": (1, True, 12_000), "hub.assembly_size": (1, True, 12_000), "hub.rows": (1, True, 12_000),
-    "hub.max_assemblies": (1, True, 2000), "memory.max_episodes": (0, True, 2000), "compare_with": (0, True, 2000),
+    "hub.max_assemblies": (1, True, 2000), "memory.max_episodes": (0, True, 2000),
     # the sheet's neurons (memory.rows x memory.cols: the paper's 20 x 50) are each driven by every other in a recall
     # step, so its work grows as their square: 100 x 1000 is 10^4x the paper's (the hub is the sheet's object rows,
     # hub.rows x hub.n_neurons = 12 x memory.cols, so this bounds it too); a recall step settles in ~5 clamped and ~2
@@ -107,10 +107,10 @@ RANGES = {
     # pathway strengths and their factors multiply an activity (a negative one flips its sign); tolerances and
     # floors compare magnitudes; ridges are added to a fit's diagonal (a negative one can make it singular)
     "rules.eliminated_strength": NON_NEGATIVE, "rules.dominant_strength": NON_NEGATIVE,
-    "rules.growth_step": NON_NEGATIVE, "rules.uncertain_decay": NON_NEGATIVE, "rules.uncertain_floor": NON_NEGATIVE,
-    "rules.same_abs_cm3": NON_NEGATIVE, "rules.same_rel": NON_NEGATIVE, "rules.contradiction_abs_cm3": NON_NEGATIVE,
-    "rules.contradiction_rel": NON_NEGATIVE, "retro_floor": NON_NEGATIVE, "readout_ridge": NON_NEGATIVE,
-    "fate_ridge": NON_NEGATIVE,
+    "rules.growth_step": NON_NEGATIVE, "rules.uncertain_floor": NON_NEGATIVE,   # uncertain_decay, contradiction_rel:
+    "rules.same_abs_cm3": NON_NEGATIVE, "rules.same_rel": NON_NEGATIVE,          # fractions (below)
+    "rules.contradiction_abs_cm3": NON_NEGATIVE, "retro_floor": NON_NEGATIVE, "readout_ridge": NON_NEGATIVE,
+    "fate_ridge": NON_NEGATIVE, "fate_boundary_ridge": NON_NEGATIVE,
     # a standard deviation; the readout divides by these two
     "felt_mass_noise_g": NON_NEGATIVE, "readout_rel_precision": POSITIVE, "readout_huber": POSITIVE,
     # the world: standard deviations of the senses' noise (numpy refuses a negative scale)
@@ -144,7 +144,7 @@ RANGES = {
     "world.robot.velocity_gain": NON_NEGATIVE, "world.robot.max_velocity": POSITIVE,
     # counts of steps, iterations, points, pixels, waypoints that something is divided by, averaged or stepped over;
     # each bounded where more is only more work: a wait of the simulator at most 240,000 steps (1000 s of simulated
-    # time, train/config_checks.py WAIT_STEPS); pybullet's solver converges in its default 50 iterations; 60 IK
+    # time, train/runner/config_checks.py WAIT_STEPS); pybullet's solver converges in its default 50 iterations; 60 IK
     # iterations solve every target the bench box reaches (sim/kinematics.py); the level's Newton iterations reach
     # its 0.1 nm tolerance in a handful (30 by default); 1000 waypoints are 0.3 mm apart on the 31 cm carry; a render
     # costs ~20 ms at 256 px and 64x that at 2048; 4096 points already sample a body's volume to 0.5 % (16x that)
@@ -160,9 +160,33 @@ RANGES = {
     # the jar's round wall is a polygon of this many staves (pybullet builds 16 to a link; 256 make the polygon's
     # area within 0.01 % of the circle's)
     "world.tank.staves": (3, True, 256),
-    # the run's seed (the agent's is the run's: train.experiment sets it)
-    "seed": (0, True, MAX_SEED - 1),
+    # the run's seed (the agent's is the run's: train.learning.experiment sets it) and the IK's restarts' generator's
+    # (a torch.Generator takes 64 bits)
+    "seed": (0, True, MAX_SEED - 1), "world.ik.seed": (0, True, MAX_SEED - 1),
+    # episodes a recall brings back are at most those a memory holds (memory.max_episodes, at most 2000)
+    "fate_recalls": (1, True, 2000), "memory.max_recalls": (1, True, 2000),
+    # a match of the hub's relative activity (the same object shown again: 1, exactly or a hair less) and the word
+    # maps' cosines (imagine_floor) and fraction of goal words heard (goal_floor) lie in 0..1: a threshold at or below
+    # 0 takes every object for the first one (every phrase for a name, for the goal), one above 1 never matches
+    "hub.match_threshold": (0, False, 1), "imagine_floor": (0, False, 1), "goal_floor": (0, False, 1),
+    # "marginally reduce": a factor above 1 would grow an undecided pathway; the contradiction's relative tolerance
+    # compares |observed - expected| with the larger of the two: beyond 1 nothing is ever off by that much (same_rel
+    # is at most it: train/runner/config_checks.py)
+    "rules.uncertain_decay": FRACTION, "rules.contradiction_rel": (0, True, 1, False),
+    # a neuron's estimate of its own activity: 0 (off) .. 1 (on), a stored episode's own neurons exactly 1; a neuron
+    # fires above the threshold, so at 1 or more none ever does (every recall empty, every prediction missing)
+    "memory.threshold": (0, True, 1, False),
+    # compared with no recalled episode, no rule ever fires (what --ablate rules says); none: with every one
+    "compare_with": (1, True, 2000),
+    # pulls down (the water's force and the hand's weighing divide by it; 0 or less: nothing falls into the jar)
+    "world.tank.gravity": POSITIVE, "world.tank.water.gravity": POSITIVE,
 }
+# an int field without an upper bound above (a count, a size): at most this, what a 64-bit tensor or generator holds
+MAX_INT = MAX_SEED - 1
+# bounds of each element of a flat tuple field: colours are RGB(A) fractions; an arm motor without force never
+# moves its joint (the object is never delivered, found at the first drop)
+ELEMENT_RANGES = {"world.tank.jar_rgba": FRACTION, "world.tank.water_rgba": FRACTION, "world.tank.ball_rgb": FRACTION,
+                  "world.robot.arm_max_force": POSITIVE}
 
 
 class ConfigError(Exception):
@@ -389,6 +413,21 @@ def check_world(world_config, objects) -> None:
         raise ConfigError(f"world.tank: the ball (ball_diameter_cm {tank.ball_diameter_cm:g}, ball_mass_g "
                           f"{tank.ball_mass_g:g}, water.density {tank.water.density:g}) floats {draft:.2f} cm deep, "
                           f"more than the jar's {jar.water_depth_cm:g} cm of water", "world.tank")
+    robot, default = world_config.robot, RobotConfig()
+    if robot.home_arm != default.home_arm:                                                              # set_arm
+        limits = _joint_limits(icub_urdf_path())
+        for name, q in zip(ARM_JOINTS, robot.home_arm):
+            lo, hi = limits[name]
+            if not lo <= q <= hi:
+                raise ConfigError(f"world.robot.home_arm: {name}={q:g} rad is outside [{lo:.4f}, {hi:.4f}]",
+                                  "world.robot.home_arm")
+    if robot.colliding_links != default.colliding_links:                                                # _rewrite
+        from sim.robot import parsed_urdf
+        links = {link.get("name") for link in parsed_urdf(icub_urdf_path()).findall("link")}
+        if bad := [name for name in robot.colliding_links if name not in links]:
+            raise ConfigError(f"world.robot.colliding_links: {_show(bad[0])} is not a link of the iCub (its arm's: "
+                              f"{', '.join(sorted(n for n in links if n.startswith('r_')))[:200]}...)",
+                              "world.robot.colliding_links")
     posture = world_config.robot.body_posture
     if posture != RobotConfig().body_posture:                                                           # load_icub
         limits = _joint_limits(icub_urdf_path())
@@ -541,6 +580,8 @@ def _check_scalar(key: str, kind: type, value, optional: bool = False, bounds=No
     if kind is float and isinstance(value, int) and not isinstance(value, bool):
         ok = True
     rng = bounds if bounds is not None else RANGES.get(key, NON_NEGATIVE if kind is int else None)
+    if kind is int and rng is not None and rng[2] is None:
+        rng = (rng[0], rng[1], MAX_INT)   # what a 64-bit tensor or generator holds
     if not ok:
         raise ConfigError(f"{key} takes {KINDS[kind]}{' or none' if optional else ''}, got {_show(value)}", key)
     if kind is float:
@@ -557,15 +598,18 @@ def _check_scalar(key: str, kind: type, value, optional: bool = False, bounds=No
 
 
 def _range_text(rng) -> str:
-    lo, inclusive, hi = rng
+    lo, inclusive, hi, *below = rng
+    if below and not below[0]:
+        return f"from {lo} to below {hi}"
     if hi is not None:
         return f"from {lo} to {hi:,}" if hi > 10 ** 6 else f"from {lo} to {hi}"
     return f"{'>=' if inclusive else '>'} {lo}"
 
 
 def _in_range(v, rng) -> bool:
-    lo, inclusive, hi = rng
-    return (v >= lo if inclusive else v > lo) and (hi is None or v <= hi)
+    """rng: (low, low included, high or None) or, for a high bound not included, (..., high, False)."""
+    lo, inclusive, hi, *hi_in = rng
+    return (v >= lo if inclusive else v > lo) and (hi is None or (v <= hi if not hi_in or hi_in[0] else v < hi))
 
 
 def _kind(x) -> type:
@@ -600,7 +644,11 @@ def _check_tuple(key: str, current, value, optional: bool = False):
                 raise ConfigError(f"{key} takes {desc}, got {_show(value)} ({where} is {_show(x)})", key)
             out.append(tuple(_element(f"{where}[{j}]", k, y, key, desc) for j, (k, y) in enumerate(zip(inner, x))))
         else:
-            out.append(_element(where, elem, x, key, desc))
+            x = _element(where, elem, x, key, desc)
+            if key in ELEMENT_RANGES and not _in_range(x, ELEMENT_RANGES[key]):
+                raise ConfigError(f"{key} takes {desc}, each {_range_text(ELEMENT_RANGES[key])}, got {where} = "
+                                  f"{_show(x)}", key)
+            out.append(x)
     return tuple(out)
 
 

@@ -1,12 +1,12 @@
 """A run's settings from its flags: --orders and --seed as given, the config from --config, --set, --model, --ablate
-and --seed (train/config.py), a resumed run's own settings from DIR/run.json, the objects, and every check of them
+and --seed (train/common/config.py), a resumed run's own settings from DIR/run.json, the objects, and every check of them
 that needs no simulation.
 
 The config's overrides apply in order, a later value of a key replacing an earlier one: the --config file, each --set
 in the order given, then --model, --ablate and --seed (shorthands for the keys model, ablate and seed). Their syntax
 and the run-level keys are checked torch-free (gather_config); every other key against the dataclasses
 (resolve_config, which imports torch and the simulator). Each refusal is a UsageError naming where the value came
-from. train/sweep.py shares the tables of models and ablations and check_capacity.
+from. The tables of models and ablations and check_capacity are train/common/models.py's, shared with the sweeps.
 """
 
 from __future__ import annotations
@@ -16,17 +16,15 @@ import copy
 import re
 from pathlib import Path
 
-from train.endings import UsageError
-from train.out_dir import CONFIG_NAME, RUN_NAME
+from train.common.exits import UsageError
+from train.common.models import ABLATIONS, MODELS
+from train.runner.out_dir import CONFIG_NAME, RUN_NAME
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OBJECTS = ROOT / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
-MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
-ABLATIONS = {"paper": ("rules", "gating"), "contextual": ("rules", "gating", "context", "fit"),
-             "extended": ("rules", "gating", "prior")}                   # and .ABLATIONS
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
 
@@ -53,7 +51,7 @@ def gather_config(a) -> None:
     a.overrides {dotted key: value}, where each came from as a.origins {key: "--set k=v" | "--config FILE" | flag},
     and the run-level keys resolved into a.model, a.ablate, a.seed. Torch-free: the syntax, the file and these three
     keys are checked here; every other key against the dataclasses in resolve_config."""
-    from train.config import ConfigError, load_toml, parse_set
+    from train.common.config import ConfigError, load_toml, parse_set
 
     overrides, origins = {}, {}
 
@@ -78,15 +76,18 @@ def gather_config(a) -> None:
         put("model", a.model, "--model")
     if a.ablate is not None:
         put("ablate", list(dict.fromkeys(a.ablate)), "--ablate")
+    if getattr(a, "explore", None) is not None:
+        put("explore", a.explore, "--explore")
     if a.seed is not None:
         put("seed", a.seed, "--seed")
     a.overrides, a.origins = overrides, origins
-    run_level(a)
+    if not getattr(a, "resume", False):   # --resume: once the run's own model is known (adopt_run)
+        run_level(a)
 
 
 def run_level(a) -> None:
     """a.model, a.ablate, a.seed from a.overrides, checked (torch-free)."""
-    from train.config import show
+    from train.common.config import show
 
     overrides, origins = a.overrides, a.origins
     model = overrides.get("model", "paper")
@@ -110,10 +111,11 @@ def adopt_run(a) -> None:
     value. A run from before run.json: the flags as given (the checkpoint's check refuses a mismatch, saying the
     directory holds no run.json)."""
 
-    from train.config import show
+    from train.common.config import show
 
     path = a.out / RUN_NAME
     if path.is_symlink() or not path.is_file():
+        run_level(a)   # a run from before run.json: the flags as given
         return
     try:
         from sim.input_files import InputFileError, read_json   # bounded, strict (duplicate keys, nesting)
@@ -194,11 +196,11 @@ def count_orders(n_objects: int, orders: str) -> int:
 
 
 def resolve_config(args, objects):
-    """The run's config (train.config.RunConfig: agent and world) from args.overrides, checked against the
+    """The run's config (train.common.config.RunConfig: agent and world) from args.overrides, checked against the
     dataclasses and against the objects (a world its workers could not build). Imports torch and the simulator.
     UsageError naming where the refused key came from."""
-    from train.config import ConfigError, resolve
-    from train.config_checks import check_run
+    from train.common.config import ConfigError, resolve
+    from train.runner.config_checks import check_run
 
     try:
         config = resolve(args.overrides)
@@ -216,31 +218,11 @@ def origin(origins: dict, key: str | None) -> str:
     return f"{origins[hits[-1]]}: " if hits else ""
 
 
-def check_capacity(agent, n_train: int, setting=lambda key, value: f"--set {key}={value}") -> str | None:
-    """Why a run of n_train episodes cannot end with this AgentConfig, in one line, or None. A memory or hub whose
-    when_full is `refuse` stops the run at its first episode past capacity, maybe hours in: refused before anything
-    is written instead. The hub counts the train objects: probes are predicted on copies and the goal trials run on
-    a copy with room for theirs (train/trials.py roomy_copy). setting(key, value) spells a fix (train/sweep.py's
-    differs)."""
-    full = []   # (part, its size's key, the size) of each part that would refuse
-    for part, key in (("memory", "max_episodes"), ("hub", "max_assemblies")):
-        c = getattr(agent, part)
-        if c.when_full == "refuse" and n_train > getattr(c, key):
-            full.append((part, key, getattr(c, key)))
-    if not full:
-        return None
-    sizes = ", ".join(f"{part}.{key} = {size} and {part}.when_full = refuse" for part, key, size in full)
-    forget = " ".join(setting(f"{part}.when_full", "forget_oldest") for part, _, _ in full)
-    grow = " ".join(setting(f"{part}.{key}", n_train) for part, key, _ in full)
-    return (f"{n_train} train objects but {sizes}: the run would stop at episode "
-            f"{min(size for _, _, size in full) + 1}; {forget} (or forget_weakest), or {grow}")
-
-
 def world_kw(args) -> dict:
     """Physics' `world` argument: the config's world when it is not the default one (the default needs none, and
     the stand-ins of Physics in tests/test_checkpoint.py take none)."""
     from sim.world import WorldConfig
-    from train.config import config_dict
+    from train.common.config import config_dict
 
     world = args.run_config.world
     return {} if config_dict(world) == config_dict(WorldConfig()) else {"world": world}
@@ -259,7 +241,7 @@ def check_same_config(args, objects, stored_agent: dict) -> None:
 
     from aesop_torch.agent import AgentConfig
     from sim.world import WorldConfig
-    from train.config import config_dict, first_difference, flatten, show
+    from train.common.config import config_dict, first_difference, flatten, show
 
     def refuse(key, here, there):
         raise UsageError(f"--resume: the config's {key} differs from the interrupted run in {args.out} "
@@ -308,7 +290,7 @@ def check_same_run(args, objects, stored_run: dict) -> None:
 
 
 def as_run(agent, n_train: int, seed: int):
-    """A copy of an AgentConfig as train.experiment.Experiment runs it (its __post_init__): the run's seed, the
+    """A copy of an AgentConfig as train.learning.experiment.Experiment runs it (its __post_init__): the run's seed, the
     memory and the hub sized to the train objects."""
     agent = copy.deepcopy(agent)
     agent.seed = seed

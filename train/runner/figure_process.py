@@ -1,7 +1,7 @@
 """Figure 2 drawn in a process of its own, started before the runner imports torch.
 
 The runner's first second is torch's import, on one core, while the other core idles. A process started then imports
-`train.figures` there (matplotlib, and torch through `aesop_torch.rules`' names: ~1.6 s on that core) and waits, so
+`train.runner.figures` there (matplotlib, and torch through `aesop_torch.rules`' names: ~1.6 s on that core) and waits, so
 Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal trials) instead of an import and a drawing after
 them. It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it and ends the process) and lives until
 `close`.
@@ -9,11 +9,11 @@ them. It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it a
 
 from __future__ import annotations
 
-from train.physics import by_name, end_pool, quiet_pool
+from train.learning.sim_pool import by_name, end_pool, quiet_pool
 
 
 def _init() -> None:
-    import train.figures  # noqa: F401  the import this process exists to take off the runner's critical path
+    import train.runner.figures  # noqa: F401  the import this process exists to take off the runner's critical path
 
 
 class Drawer:

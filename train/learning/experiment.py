@@ -17,8 +17,8 @@ import torch
 
 from aesop_torch.agent import Agent, AgentConfig
 from aesop_torch.rules import RULE_NAMES
-from train import checkpoint
-from train.physics import WorldBuildError
+from train.learning import checkpoint
+from sim.errors import WorldBuildError
 
 MEASUREMENT_KEYS = ("rgb", "extent_cm", "fill", "mass_g")
 
@@ -55,7 +55,7 @@ class BadOutcome(WorldBuildError):
 
 
 def check_outcome(outcome) -> None:
-    """Raise BadOutcome (a train.physics.WorldBuildError: the run ends in one line, exit 1, its last checkpoint kept)
+    """Raise BadOutcome (a train.learning.sim_pool.WorldBuildError: the run ends in one line, exit 1, its last checkpoint kept)
     for a drop whose outcome would teach the agent something the world did not do: the object not delivered into
     the jar (the rise read is not its), a measurement that is not finite, or a negative displaced volume (no object
     lowers the water: the level's noise drowned the rise)."""
@@ -85,8 +85,10 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
                          ) -> tuple[dict, dict]:
     """(outcomes, probes) as `Experiment.outcomes` / `.probes` hold them, without physics. For tests, benchmarks and
     agents run without the simulator. sensor=None: every object displaces exactly its Archimedes volume and is
-    measured exactly as the file describes it. With a `sim.sensor_model.SensorModel`, measurements and outcomes
-    carry that model's noise, drawn per object from (seed, name) as the world draws a drop's sensor noise. The ball
+    measured exactly as the file describes it (its fate the engine's: denser than water). With a
+    `sim.sensor_model.SensorModel`, measurements and outcomes carry that model's noise, drawn per object from (seed,
+    name) as the world draws a drop's sensor noise, and the fate is the one the robot sees (SensorModel.sees_sinking,
+    measured on the physics path: an object barely denser than water is seen floating). The ball
     counts as reached after more than reachable_above_cm3, a stand-in for the reach check (in the default jar it
     lies between 14 and 365 cm^3)."""
     from sim.objects import archimedes_cm3
@@ -102,7 +104,8 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
         m, v = sensed(s)
         outcomes[s.name] = {"measurement": m, "observed_cm3": v,
                             "archimedes_cm3": float(archimedes_cm3(s, objects.jar)),
-                            "goal_before": False, "goal_after": v > reachable_above_cm3, "sank": bool(s.sinks),
+                            "goal_before": False, "goal_after": v > reachable_above_cm3,
+                            "sank": sensor.sees_sinking(s) if sensor is not None else bool(s.sinks),
                             "true": s.true_values()}
     for s in objects.probe:
         probes[s.name] = {"measurement": sensed(s)[0], "archimedes_cm3": float(archimedes_cm3(s, objects.jar))}
@@ -169,7 +172,7 @@ class Experiment:
     records: list[list[dict]] = field(default_factory=list)
     outcomes: dict = field(default_factory=dict)    # object name -> outcome_record (cached physics)
     probes: dict = field(default_factory=dict)      # probe name -> {"measurement", "archimedes_cm3"}
-    # per order, the goal trials' records (train/trials.py), played after the exploration; not checkpointed: they
+    # per order, the goal trials' records (train/learning/goal_trials.py), played after the exploration; not checkpointed: they
     # are a function of the final state
     trials: list = field(default_factory=list)
     # False: the agents' maps are not trained here because a state dict is about to bring them (from_state_dict)
@@ -194,7 +197,12 @@ class Experiment:
         return self.t >= self.n_episodes
 
     def step(self, world_episode) -> list[dict]:
-        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record."""
+        """Run episode t in every order. world_episode(name, order_index, t) -> outcome_record. With
+        AgentConfig.explore "active" each order's agent chooses its object among those its order has not yet
+        presented (aesop_torch/exploration.py), looking at each as its cached outcome measured it, and the order is
+        rewritten from t to what was chosen (it is checkpointed: a resumed run goes on from it)."""
+        if self.config.explore == "active":
+            self._choose()
         names = [self.train_names[o[self.t]] for o in self.orders]
         outs = [world_episode(n, b, self.t) for b, n in enumerate(names)]
         meas = stack_measurements([o["measurement"] for o in outs])
@@ -227,6 +235,19 @@ class Experiment:
             new.append(rec)
         self.t += 1
         return new
+
+    def _choose(self) -> None:
+        """Each order's agent chooses its object for episode t (exploration.choose_in_order), from the objects as
+        their cached outcomes measured them (cached physics: every train object was dropped once up front)."""
+        from aesop_torch.exploration import choose_in_order
+        missing = [n for n in self.train_names if n not in self.outcomes]
+        if missing:
+            raise ValueError(f"explore 'active' looks at every object on the stand, but {missing[0]!r} has no "
+                             "measured outcome (it needs cached physics: each object measured once up front)")
+        seen = self.agent.activities(stack_measurements([self.outcomes[n]["measurement"] for n in self.train_names]))
+        orders = torch.tensor(self.orders, dtype=torch.long)
+        choose_in_order(self.agent, *seen, orders, self.t)
+        self.orders = orders.tolist()
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """(B,) what each order's agent expects one object to displace, in cm^3. The object: what the robot
@@ -327,7 +348,7 @@ def one_thread():
 
 
 def load_experiment(path) -> Experiment:
-    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.checkpoint.load), as a live
+    """A run's checkpoint (train/run.py writes DIR/checkpoints/latest.pt), verified (train.learning.checkpoint.load), as a live
     Experiment, agents included."""
     with one_thread():   # building a few agents is hundreds of tiny ops: a second thread only waits (see one_thread)
         return Experiment.from_state_dict(checkpoint.load(path)["experiment"])

@@ -4,8 +4,8 @@ right, the prediction error against Archimedes over episodes, against the floor 
 As the paper plots them: certainty on a 0..1 axis, one colour per property, and every point names its state by its
 letter (dominant and irrelevant both have certainty 1, so the letter is what tells a flip from one to the other).
 The error on a log axis: it falls by orders of magnitude, and a learner can only approach, never pass, the error of
-the best reading of Archimedes its senses allow (the dashed floor, `train.experiment.senses_floor`).
-More than MAX_CURVES orders are drawn as medians with bands. A population run (`train.population`, every order of
+the best reading of Archimedes its senses allow (the dashed floor, `train.learning.experiment.senses_floor`).
+More than MAX_CURVES orders are drawn as medians with bands. A population run (`train.learning.population`, every order of
 the set) passes its per-episode errors: the right panel's median and 25-75 % / 10-90 % bands are then over ALL its
 orders, weighted by how many orders share each error, and the share of orders whose final knowledge is not the
 majority's is stated (a few dozen lexicographic orders hid that 43 % of a 9-object set's orders disagreed).
@@ -26,7 +26,7 @@ from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter  # noqa:
 
 from aesop_torch.encoders import OBJECT_PROPERTIES, PROPERTIES, object_properties  # noqa: E402
 from aesop_torch.rules import STATES  # noqa: E402
-from train.quantiles import weighted_quantiles  # noqa: E402
+from train.common.quantiles import weighted_quantiles  # noqa: E402
 
 MAX_CURVES = 12  # orders drawn one by one; with more, medians and bands over all orders (a person reads ~12 curves)
 STATE_LETTERS = "ULDI"   # per rules.STATES: unknown, likely irrelevant, dominant, irrelevant
@@ -101,7 +101,7 @@ def error_bands(runs: list[list[dict]], population: dict | None = None) -> tuple
 
 def disagreement(runs: list[list[dict]], population: dict | None = None) -> tuple[float, int, int, str]:
     """(share, count, orders, majority key) of the orders whose final knowledge is not the most common one: the
-    population's when given, else the runs' (keys as train.summary's: one letter of STATE_LETTERS per property)."""
+    population's when given, else the runs' (keys as train.runner.summary's: one letter of STATE_LETTERS per property)."""
     if population is not None:
         n = int(population["orders"])
         share = 1.0 - float(population["agree_fraction"])
@@ -110,7 +110,7 @@ def disagreement(runs: list[list[dict]], population: dict | None = None) -> tupl
             for r in runs if r]
     if not keys:
         return 0.0, 0, 0, ""
-    common = max(dict.fromkeys(keys), key=keys.count)   # ties: the first seen, as train.population.agreement
+    common = max(dict.fromkeys(keys), key=keys.count)   # ties: the first seen, as train.learning.population.agreement
     other = sum(k != common for k in keys)
     return other / len(keys), other, len(keys), common
 

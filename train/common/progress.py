@@ -42,7 +42,7 @@ class Step:
             self.bar.update(n)
 
     def to(self, done: int, total: int | None = None) -> None:
-        """For callbacks that report a running count (train.population's progress(done, total))."""
+        """For callbacks that report a running count (train.learning.population's progress(done, total))."""
         self.update(done - self.done)
 
     def line(self, text: str) -> None:

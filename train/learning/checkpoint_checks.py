@@ -1,20 +1,37 @@
 """A checkpoint's values within their ranges, before an Experiment is restored from them.
 
-train.checkpoint.load calls `state_problem` after its structure check (keys, types, shapes and dtypes are right),
-without importing train.experiment (which imports train.checkpoint).
+train.learning.checkpoint.load calls `state_problem` after its structure check (keys, types, shapes and dtypes are right),
+without importing train.learning.experiment (which imports train.learning.checkpoint).
 """
 
 from __future__ import annotations
 
 import math
 
-import torch
+
+MEASUREMENT_LENGTHS = {"rgb": 3, "extent_cm": 3, "fill": None, "mass_g": None}
+
+
+def finite(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
+
+
+def measurement_ok(m) -> bool:
+    if not isinstance(m, dict) or set(m) != set(MEASUREMENT_LENGTHS):
+        return False
+    for k, length in MEASUREMENT_LENGTHS.items():
+        v = m[k]
+        if length is None and not finite(v):
+            return False
+        if length is not None and not (isinstance(v, list) and len(v) == length and all(map(finite, v))):
+            return False
+    return True
 
 
 def state_problem(e: dict, run: dict) -> str | None:
     """What is out of range in a checkpoint's experiment (`Experiment.state_dict`) and run, or None: the run's
     objects as the objects file would take them, the names they give, each part's values (`_outcomes_problem`,
-    `_records_problem`, `_agent_values_problem`). The config is checked with the structure (train.checkpoint)."""
+    `_records_problem`, `_agent_values_problem`). The config is checked with the structure (train.learning.checkpoint)."""
     from sim.objects import ObjectsFileError, parse_objects
     try:
         objects = parse_objects(run["objects"])
@@ -29,7 +46,7 @@ def state_problem(e: dict, run: dict) -> str | None:
 # what the senses can give for an object the objects file admits (sim.objects.ObjectsConfig): the least fill of its
 # shapes is a sphere's, pi / 6 = 0.52 (MIN_FILL: half of it, for the camera's error); sides of 1 cm up to the 29 cm
 # jar (MIN_EXTENT_CM, MAX_EXTENT_CM: 10x either way); 1 kg at most, the hand's noise at most a quarter of the
-# heaviest object (train/config_checks.py), so MAX_MASS_G: 10x
+# heaviest object (train/runner/config_checks.py), so MAX_MASS_G: 10x
 MIN_FILL, MIN_EXTENT_CM, MAX_EXTENT_CM, MAX_MASS_G = 0.25, 0.1, 290.0, 10_000.0
 
 
@@ -76,13 +93,9 @@ PREDICTION_JARS = 100.0
 MAX_REL_ERROR = 1e9
 
 
-def _number(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
 def _records_problem(e: dict, jar_cm3: float = math.inf) -> str | None:
     """Each order's records name the objects its order dropped, in that order, and every field of a record is what
-    train.experiment.Experiment.step writes, of its type and in its range (summary.json, the figure and the logs
+    train.learning.experiment.Experiment.step writes, of its type and in its range (summary.json, the figure and the logs
     are made from them as they are: a NaN or a string in a number's place would reach them)."""
     from aesop_torch.rules import PROPERTIES, RULE_NAMES, STATES
 
@@ -111,13 +124,13 @@ def _cut(text: str) -> str:
 
 def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -> str | None:
     for k in ("observed_cm3", "archimedes_cm3"):
-        if not _number(rec[k]) or abs(rec[k]) > jar_cm3:
+        if not finite(rec[k]) or abs(rec[k]) > jar_cm3:
             return f"{k} {_cut(str(rec[k]))} is not a volume the jar holds ({jar_cm3:.0f} cm^3)"
     v = rec["predicted_cm3"]
-    if v is not None and (not _number(v) or abs(v) > PREDICTION_JARS * jar_cm3):
+    if v is not None and (not finite(v) or abs(v) > PREDICTION_JARS * jar_cm3):
         return f"predicted_cm3 {_cut(str(v))} is not a prediction (a finite volume within {PREDICTION_JARS:g} jars)"
     v = rec["probe_rel_error"]
-    if v is not None and (not _number(v) or not 0 <= v <= MAX_REL_ERROR):
+    if v is not None and (not finite(v) or not 0 <= v <= MAX_REL_ERROR):
         return f"probe_rel_error {_cut(str(v))} is not a relative error"
     if not isinstance(rec["goal_reached"], bool):
         return f"goal_reached {_cut(str(rec['goal_reached']))} is not true or false"
@@ -127,18 +140,18 @@ def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -
         return f"knowledge and rules must name the same properties, among them {', '.join(properties)}"
     for prop, k in knowledge.items():
         if not isinstance(k, dict) or set(k) != {"state", "certainty"} or k["state"] not in states \
-                or not _number(k["certainty"]) or not 0 <= k["certainty"] <= 1:
+                or not finite(k["certainty"]) or not 0 <= k["certainty"] <= 1:
             return f"knowledge of {_cut(str(prop))} is not a state of {', '.join(states)} with a certainty in 0..1"
         if rules[prop] not in rule_names:
             return f"rules of {_cut(str(prop))}: {_cut(str(rules[prop]))} is not one of {', '.join(rule_names)}"
     m = rec["perceived"]
-    if not _measurement_shape_ok(m) or (p := _measurement_problem(m)):
-        return f"perceived: {p if _measurement_shape_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
+    if not measurement_ok(m) or (p := _measurement_problem(m)):
+        return f"perceived: {p if measurement_ok(m) else 'not a measurement (rgb, extent_cm, fill, mass_g)'}"
     if "true" in rec and (p := _true_problem(rec["true"])):
         return p
     by = rec.get("certainty_by_context", {})
     if not isinstance(by, dict) or not all(
-            isinstance(c, dict) and set(c) == set(properties) and all(_number(x) and 0 <= x <= 1 for x in c.values())
+            isinstance(c, dict) and set(c) == set(properties) and all(finite(x) and 0 <= x <= 1 for x in c.values())
             for c in by.values()) or not set(by) <= {"floating", "sinking", "fate"}:
         return "certainty_by_context is not a certainty in 0..1 per context (floating, sinking, fate) and property"
     return None
@@ -146,14 +159,11 @@ def _record_problem(rec: dict, jar_cm3: float, properties, rule_names, states) -
 
 def _true_problem(true) -> str | None:
     if not (isinstance(true, dict) and set(true) <= TRUE_KEYS and all(
-            _number(x) or (isinstance(x, list) and len(x) == 3 and all(map(_number, x))) for x in true.values())):
+            finite(x) or (isinstance(x, list) and len(x) == 3 and all(map(finite, x))) for x in true.values())):
         return f"true is not the file's values ({', '.join(sorted(TRUE_KEYS))}: numbers)"
     return None
 
 
-def _measurement_shape_ok(m) -> bool:
-    from train.checkpoint import _measurement_ok
-    return _measurement_ok(m)
 
 
 def _agent_values_problem(e: dict) -> str | None:
@@ -169,6 +179,8 @@ def _agent_values_problem(e: dict) -> str | None:
     - episodes stored (memory.count) at most the records' encoded episodes; assemblies at most t; a neuron's usage at
       most the assemblies; rules fired once per property and episode, Uncertainty counted once per comparison (at most
       t * t); states codes of rules.STATES."""
+    import torch
+
     from aesop_torch.encoders import default_map_configs
     from aesop_torch.rules import STATES
     from aesop_torch.som import SelfOrganizingMap

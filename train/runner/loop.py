@@ -12,9 +12,9 @@ import copy
 import sys
 import time
 
-from train.endings import UsageError, fresh_line, how, os_error, sigint_ignored, signals_held
-from train.out_dir import CONFIG_NAME, RUN_NAME, holds_a_run, lock_out, remove_leftovers, unlock_created
-from train.run_config import agent_keys_set, check_same_config, check_same_run, run_settings, world_kw
+from train.common.exits import UsageError, fresh_line, how, os_error, sigint_ignored, signals_held
+from train.runner.out_dir import CONFIG_NAME, RUN_NAME, holds_a_run, lock_out, remove_leftovers, unlock_created
+from train.runner.settings import agent_keys_set, check_same_config, check_same_run, run_settings, world_kw
 
 FULL_TB_ORDERS = 16      # tensorboard run directories beyond this would drown a person; see README
 _OPEN: dict = {"physics": None, "drawer": None, "logs": []}   # what the run has open, closed whatever way it ends
@@ -39,9 +39,9 @@ def close_quietly() -> None:
 
 
 def start_drawer() -> None:
-    """The figure process (train/drawing.py), started now and kept in _OPEN in one step (a pool dropped halfway
+    """The figure process (train/runner/figure_process.py), started now and kept in _OPEN in one step (a pool dropped halfway
     would be ended only by its finaliser)."""
-    from train.drawing import Drawer
+    from train.runner.figure_process import Drawer
     with signals_held():
         _OPEN["drawer"] = _OPEN["drawer"] or Drawer()
 
@@ -49,20 +49,23 @@ def start_drawer() -> None:
 def prepare(args, objects, n_orders: int, physics=None):
     """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
     checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
-    checked. physics (train.physics.Physics, optional): a new run forks its workers once everything is checked and
+    checked. physics (train.learning.sim_pool.Physics, optional): a new run forks its workers once everything is checked and
     before the experiment is built, so they build their worlds while the maps train (0.3 s off the wall time)."""
     import torch
 
     from aesop_torch.malloc import keep_freed_memory
-    from train.experiment import Experiment, draw_orders
-    from train.summary import FULL_RUNS
+    from train.learning.experiment import Experiment, draw_orders
+    from train.runner.summary import FULL_RUNS
 
     keep_freed_memory()   # freed tensors are reused rather than faulted in again (aesop_torch/malloc.py)
 
     # small tensors (at most 64 agents in detail) run faster on one thread than on two fighting each other, and so
     # does building the experiment (its maps' training took 6.9 s on 2 threads of a busy machine, 0.3 s on 1); a
-    # population of many orders sets its own (train/population.py)
+    # population of many orders sets its own (train/learning/population.py)
     torch.set_num_threads(1)
+    if args.run_config.agent.explore == "active" and args.physics == "per-episode":
+        raise UsageError("--explore active looks at every object on the stand before choosing, from its measurement "
+                         "on cached physics: it does not run with --physics per-episode")
     if n_orders > FULL_RUNS and args.physics == "per-episode":
         raise UsageError(f"--physics per-episode with {n_orders} orders would simulate "
                          f"{n_orders * len(objects.train)} drops; more than {FULL_RUNS} orders run as a population "
@@ -84,7 +87,7 @@ def prepare(args, objects, n_orders: int, physics=None):
             physics.submit_early(measurement_jobs(objects, [o.name for o in objects.train],
                                                   [o.name for o in objects.probe], {}, {}, args.physics,
                                                   args.frames)[-1])
-        # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.experiment)
+        # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.learning.experiment)
         config = copy.deepcopy(args.run_config.agent)
         try:
             return Experiment([o.name for o in objects.train], [o.name for o in objects.probe], orders,
@@ -102,12 +105,14 @@ def prepare(args, objects, n_orders: int, physics=None):
 
 
 def resume_experiment(args, objects):
-    from train.checkpoint import CheckpointError, load
-    from train.experiment import Experiment
+    from train.learning.checkpoint import CheckpointError, load
+    from train.learning.experiment import Experiment
 
     ckpt_path = args.out / "checkpoints" / "latest.pt"
     if not ckpt_path.is_file():
-        raise UsageError(f"--resume: no checkpoint at {ckpt_path}")
+        raise UsageError(f"--resume: no checkpoint at {ckpt_path}: the run ended before it wrote one, so there is "
+                         f"nothing to continue; start it again without --resume (with another --out, or remove "
+                         f"{args.out})")
     try:
         state = load(ckpt_path)
     except CheckpointError as e:
@@ -118,10 +123,10 @@ def resume_experiment(args, objects):
 
 
 def write_config(config: dict, path) -> None:
-    """config.json, atomically (train.checkpoint's writer: a temporary file beside it, fsynced, renamed over it)."""
+    """config.json, atomically (train.learning.checkpoint's writer: a temporary file beside it, fsynced, renamed over it)."""
     import json
 
-    from train.checkpoint import write_text_atomic
+    from train.learning.checkpoint import write_text_atomic
     write_text_atomic(json.dumps(config, indent=1) + "\n", path)
 
 
@@ -141,7 +146,8 @@ def run(args, exp, objects, resumed: bool) -> int:
         return (f"the last checkpoint ({ckpt}, {saved['t']} of {exp.n_episodes} episodes) is intact: "
                 f"continue with {how_on}")
 
-    from train.physics import WorkerDied, WorldBuildError
+    from sim.errors import WorldBuildError
+    from train.learning.sim_pool import WorkerDied
 
     def ended(line: str, code: int) -> int:
         with sigint_ignored():
@@ -168,12 +174,12 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     import json
 
     from sim.objects import archimedes_cm3
-    from train.checkpoint import save_atomic, write_text_atomic
-    from train.config import RunConfig, config_dict
-    from train.experiment import draw_orders, outcome_record, plain_measurement
-    from train.physics import Physics, WorkerDied
-    from train.progress import Step
-    from train.summary import build_summary, knowledge_table, summary_text
+    from train.learning.checkpoint import save_atomic, write_text_atomic
+    from train.common.config import RunConfig, config_dict
+    from train.learning.experiment import draw_orders, outcome_record, plain_measurement
+    from train.learning.sim_pool import Physics, WorkerDied
+    from train.common.progress import Step
+    from train.runner.summary import build_summary, knowledge_table, summary_text
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders, "model": args.model, "ablate": args.ablate}
     # the whole config as the run uses it: the agents' as the experiment holds it (seed, buffers sized), the world's
@@ -190,6 +196,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     physics = _OPEN["physics"] = _OPEN["physics"] or Physics(objects, seed=args.seed, gui=args.gui,
                                                              **world_kw(args))   # main() made it
     specs = {o.name: o for o in objects.train + objects.probe}
+    density = args.run_config.world.tank.water.density / 1000.0   # g/cm^3: Archimedes' figure in the world's water
     # probes are inspected once; with cached physics every distinct train object is dropped once, all up front. A
     # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
     # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
@@ -198,8 +205,8 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
                                                      exp.probes, exp.physics, args.frames)
     probe_drops = {}
     submitted = physics.submit(jobs)   # the workers start on them while the logs open (a new run's: since prepare)
-    from train.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
-    from train.trials import planner_sequences
+    from train.runner.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
+    from train.learning.goal_trials import planner_sequences
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
                             for b in range(min(len(exp.orders), FULL_TB_ORDERS))]
     if not resumed:
@@ -229,7 +236,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             if name in on_stands:
                 probe_drops[name], m = outcome_record(m), m.measurement
             exp.probes[name] = {"measurement": plain_measurement(m),
-                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar))}
+                                "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar, density))}
         checkpoint()
     # every order as a population (more than the detailed ones) runs on the figure process beside the detailed
     # orders and the goal trials: it needs only the measured outcomes (cached physics: all in by now)
@@ -267,7 +274,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     if population_job is None:
         orders = draw_orders(len(exp.train_names), args.orders, args.seed)
         if len(orders) > len(exp.orders):   # not started above (outcomes measured per episode): here, in line
-            from train.population import run_population
+            from train.learning.population import run_population
             print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in "
                   "detail)", flush=True)
             with Step("population", len(orders), "order") as bar:
@@ -276,7 +283,7 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         # Figure 2 shows the exploration: drawn and written by the drawer while the goal trials run
         figure = _draw_figure(exp, out, population)
     if objects.trials:
-        from train.trials import play_trials
+        from train.learning.goal_trials import play_trials
         print(f"goal trials: {len(objects.trials)} trial(s) with each of {len(exp.orders)} order(s)' agents, the jar "
               "not reset between the drops of a trial (each new sequence of drops simulated from a fresh jar)",
               flush=True)
@@ -329,12 +336,13 @@ def measurement_jobs(objects, train_names, probe_names, outcomes: dict, probes_d
 
 
 def _start_population(args, exp):
-    """Every order (when there are more than the detailed ones) as a population (train.population.run_orders) on the
-    figure process, started now: an object whose get() waits for its result; None when there is no population or
-    its outcomes are not all measured yet (per-episode physics: _run runs it in line at the end). The runner's own
-    process then runs the detailed orders and the goal trials meanwhile: all 9! orders of 9 objects took 23 of the
-    run's 40 s, and the detailed orders and the trials another 9 s after it."""
-    from train.run_config import count_orders
+    """Every order (when there are more than the detailed ones) as a population
+    (train.learning.population.run_orders) on the figure process, started now: an object whose get() waits for its
+    result; None when there is no population or its outcomes are not all measured yet (per-episode physics: _run
+    runs it in line at the end). The runner's own process then runs the detailed orders and the goal trials
+    meanwhile: all 9! orders of 9 objects took 23 of the run's 40 s, and the detailed orders and the trials another
+    9 s after it."""
+    from train.runner.settings import count_orders
 
     if count_orders(len(exp.train_names), args.orders) <= len(exp.orders) or \
             any(n not in exp.outcomes for n in exp.train_names):
@@ -342,17 +350,17 @@ def _start_population(args, exp):
     print(f"population: {count_orders(len(exp.train_names), args.orders)} orders side by side on the figure process "
           f"(the first {len(exp.orders)} also run in detail here)", flush=True)
     start_drawer()   # main() started it
-    return _OPEN["drawer"].draw("train.population:run_orders", exp.train_names, exp.probe_names, args.orders,
-                                args.seed, exp.outcomes, exp.probes, exp.config)
+    return _OPEN["drawer"].draw("train.learning.population:run_orders", exp.train_names, exp.probe_names,
+                                args.orders, args.seed, exp.outcomes, exp.probes, exp.config)
 
 
 def _draw_figure(exp, out, population):
     """Figure 2 (the exploration; a population's error bands over all its orders), drawn and written by the figure
     process: an object whose get() waits for its image."""
-    from train.experiment import senses_floor
+    from train.learning.experiment import senses_floor
 
     start_drawer()   # main() started it
-    return _OPEN["drawer"].draw("train.figures:save_figure2", exp.records, out / "figure2.png", 110,
+    return _OPEN["drawer"].draw("train.runner.figures:save_figure2", exp.records, out / "figure2.png", 110,
                                 senses_floor(exp.probes),
                                 population and {k: population[k] for k in ("orders", "agree_fraction",
                                                                            "most_common_knowledge", "curves")})

@@ -263,7 +263,7 @@ def jar_world(seed: int, n: int):
     from sim.make_objects import generate
     from sim.objects import parse_objects
     from sim.sensor_model import SensorModel
-    from train.experiment import closed_form_outcomes
+    from train.learning.experiment import closed_form_outcomes
     objs = parse_objects(generate(seed, n, 0, pairs=True))
     outcomes, _ = closed_form_outcomes(objs, sensor=SensorModel(), seed=seed)
     jar = objs.jar
@@ -362,7 +362,7 @@ def run_task(task, model: str, seeds: list[int], subjects: int, ablate: tuple = 
              ready: dict | None = None) -> dict:
     """`subjects` subjects of `kind` per seed meet the task on trial 1 (after their pre-training, and their jar life
     if experienced) and play its trials. outcome: the world (default sim.apparatus.outcome); perceive(task, tube,
-    obj): an option's measurement (default `perceived`, from the task file; train/task_run.py's, from the camera);
+    obj): an option's measurement (default `perceived`, from the task file; train/battery/task_run.py's, from the camera);
     the pre-training is always the closed form's. ready: {seed: Subjects} made already (make_subjects), copied here.
     Returns per subject "right", "choices", "swapped", "log" (each episode before and in the task), "seeds", and
     "chance", "scores" (pooled), "options", "correct"."""

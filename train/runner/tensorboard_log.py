@@ -3,7 +3,7 @@
 Scalars `certainty/<property>`, `prediction/abs_error_cm3` (|prediction - Archimedes| for the dropped object, once a
 prediction can be made), `prediction/probe_rel_error`, `rules/<property>/<E|G|U|S>` (1 when that rule fired that
 episode, else 0); text `episodes` (one line per episode); hparams once per run, in the run's own directory.
-Goal trials (train/trials.py), step = trial (1-based): `trials/drops`, `trials/excess_drops` (drops beyond the
+Goal trials (train/learning/goal_trials.py), step = trial (1-based): `trials/drops`, `trials/excess_drops` (drops beyond the
 planner's fewest) and text `trials` (one line per trial).
 
 A write that fails in tensorboard's writer thread (a full disk) is raised again by the writer in the caller's next
@@ -72,10 +72,10 @@ class OrderLog:
     @contextlib.contextmanager
     def _named(self):
         """An OSError without a file name (the writer thread's failed write, raised again here) names the log. A
-        signal meanwhile takes effect when the call is done (train.endings.signals_held): raised inside the writer's
+        signal meanwhile takes effect when the call is done (train.common.exits.signals_held): raised inside the writer's
         queue it could leave the queue's lock held, and closing the log then waited for ever (seen once: SIGTERM at a
         goal trial's line)."""
-        from train.endings import signals_held
+        from train.common.exits import signals_held
         try:
             with signals_held():
                 yield

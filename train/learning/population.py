@@ -1,6 +1,6 @@
 """Every presentation order at once: the final knowledge and probe error of a large population of orders.
 
-`train.experiment.Experiment` runs one agent per order and records every episode; for all 8! = 40,320 orders that
+`train.learning.experiment.Experiment` runs one agent per order and records every episode; for all 8! = 40,320 orders that
 is too slow and too big. Here only the end of each order is kept, and work that orders share is done once:
 
 - Prefix sharing. With the jar reset between episodes an agent's state after t episodes depends only on the first t
@@ -41,8 +41,8 @@ import torch
 
 from aesop_torch.agent import OBJECT_ROWS, Agent, AgentConfig
 from aesop_torch.memory import EpisodicMemory, Recall
-from train.experiment import stack_measurements
-from train.summary import KNOWLEDGE_LETTERS
+from aesop_torch.rules import KNOWLEDGE_LETTERS
+from train.learning.experiment import stack_measurements
 
 # Sibling trie nodes stepped together. All 40,320 orders of the default set with the plain trie (before states were
 # merged), 2 threads, shared recall cache: 32.8 s / 0.7 GB peak at 512, 31.2 s / 0.9 GB at 1024, ~31.5 s / 1.4 GB
@@ -57,7 +57,7 @@ DEFAULT_THREADS = 1
 
 
 def knowledge_keys(state: torch.Tensor) -> list[str]:
-    """(B, P) rules state codes -> B knowledge keys, the letters train.summary.knowledge_key gives."""
+    """(B, P) rules state codes -> B knowledge keys, the letters train.runner.summary.knowledge_key gives."""
     return ["".join(KNOWLEDGE_LETTERS[c] for c in row) for row in state.tolist()]
 
 
@@ -71,7 +71,7 @@ def agreement(keys: list[str]) -> tuple[str, float, dict]:
 
 
 def median_rel_errors(predicted: torch.Tensor, truth: torch.Tensor) -> list[float | None]:
-    """Row-wise `train.experiment.median_rel_error`, vectorised: (B, n_probes) predictions -> B medians (None where
+    """Row-wise `train.learning.experiment.median_rel_error`, vectorised: (B, n_probes) predictions -> B medians (None where
     no probe can be predicted). Same arithmetic: float32 errors, a NaN prediction counts as 1, the median of an even
     count is the float64 mean of the middle two, as `statistics.median` gives."""
     B, n = predicted.shape
@@ -202,7 +202,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
                    threads: int | None = None, merge: bool = True, curves: bool = False) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
-    orders: lists of indices into train_names, all of length len(train_names) (as train.experiment.draw_orders
+    orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
     gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
@@ -217,7 +217,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}; with curves=True also
     "curves": {"probe_rel_error": per episode, {"values": the distinct errors (rounded as the records), "counts":
     how many orders have each, "none": how many orders cannot predict yet}} (counts, not N numbers per episode:
-    9! orders share a few thousand values; `train.quantiles.weighted_quantiles` reads them).
+    9! orders share a few thousand values; `train.common.quantiles.weighted_quantiles` reads them).
     """
     n, N = len(train_names), len(orders)
     if n == 0 or N == 0:
@@ -241,6 +241,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         # as Experiment: an agent encodes at most one episode and one object per episode
         config.memory.max_episodes = min(config.memory.max_episodes, n)
         config.hub.max_assemblies = min(config.hub.max_assemblies, n)
+        if config.explore == "active":   # the agents choose their own objects: no prefixes to share
+            return _run_active(train_names, probe_names, order_t, outcomes, probes, config, chunk, progress, curves,
+                               t0)
         root = Agent(config, batch=1)
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
@@ -278,15 +281,77 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
                config: AgentConfig) -> dict:
     """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
-    "final_probe_cm3": what the runner asks of its figure process (train/run_loop.py), which runs it beside the
+    "final_probe_cm3": what the runner asks of its figure process (train/runner/loop.py), which runs it beside the
     detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
     from aesop_torch.malloc import keep_freed_memory
-    from train.experiment import draw_orders
+    from train.learning.experiment import draw_orders
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
     out = run_population(train_names, probe_names, draw_orders(len(train_names), orders, seed), outcomes, probes,
                          config, curves=True)
     del out["final_probe_cm3"]
+    return out
+
+
+def _run_active(train_names, probe_names, orders: torch.Tensor, outcomes: dict, probes: dict, config: AgentConfig,
+                chunk: int, progress, curves: bool, t0: float) -> dict:
+    """run_population's answer when the robot chooses its next object (AgentConfig.explore "active",
+    aesop_torch/exploration.py): what comes next depends on what the agent learned, not on the order's prefix, so
+    the orders (the teacher's first object, and the tie-breaks) run side by side in pieces of `chunk`, each agent
+    stepping the object it chose, as Experiment does. Same keys as run_population's answer; "chosen_orders" holds
+    the orders as the agents made them."""
+    from aesop_torch.exploration import choose_in_order
+    N, n = orders.shape
+    walk = _Walk(train_names, probe_names, outcomes, probes, orders[:1], chunk, None, merge=False, curves=False)
+    keys, errors, preds, chosen, curve = [], [], [], [], []
+    step_s = probe_s = 0.0
+    for lo in range(0, N, chunk):
+        part = orders[lo:lo + chunk].clone()
+        agent = Agent(config, batch=len(part))
+        if lo == 0:
+            walk.perceive(agent)
+        errs_t = []
+        for t in range(n):
+            tic = time.perf_counter()
+            obj = choose_in_order(agent, walk.acts, walk.present, part, t)
+            agent.step({k: v[obj] for k, v in walk.meas.items()}, walk.observed[obj], walk.before[obj],
+                       walk.after[obj], sank=None if walk.sank is None else walk.sank[obj],
+                       perceived=(walk.acts[obj], walk.present[obj]))
+            step_s += time.perf_counter() - tic
+            if curves and t + 1 < n:
+                tic = time.perf_counter()
+                errs_t.append(median_rel_errors(walk._probe_predictions(agent), walk.truth))
+                probe_s += time.perf_counter() - tic
+        tic = time.perf_counter()
+        pred = walk._probe_predictions(agent)
+        probe_s += time.perf_counter() - tic
+        preds.append(pred)
+        keys += knowledge_keys(agent.rules.state)
+        errors += [None if e is None else round(e, 4) for e in median_rel_errors(pred, walk.truth)]
+        chosen += part.tolist()
+        curve.append(errs_t)
+        if progress is not None:
+            progress(min(lo + chunk, N), N)
+    common, fraction, counts = agreement(keys)
+    out = {"orders": N, "final_knowledge": keys, "final_probe_rel_error": errors,
+           "final_probe_cm3": torch.cat(preds), "most_common_knowledge": common, "agree_fraction": fraction,
+           "knowledge_counts": counts, "agent_steps": N * n, "distinct_recalls": 0, "nodes_per_level": [N] * n,
+           "steps_per_level": [N] * n, "distinct_final_states": len(counts), "chosen_orders": chosen,
+           "timing_s": {"setup": 0.0, "steps": round(step_s, 3), "probes": round(probe_s, 3),
+                        "total": round(time.perf_counter() - t0, 3)}}
+    if curves:
+        per_t = []
+        for t in range(n - 1):
+            err = torch.tensor([float("nan") if e is None else round(e, 4) for c in curve for e in c[t]],
+                               dtype=torch.float64)
+            ok = err[~torch.isnan(err)]
+            values, counts_t = torch.unique(ok, return_counts=True)
+            per_t.append({"values": values.tolist(), "counts": counts_t.tolist(), "none": int(len(err) - len(ok))})
+        final = torch.tensor([float("nan") if e is None else e for e in errors], dtype=torch.float64)
+        ok = final[~torch.isnan(final)]
+        values, counts_t = torch.unique(ok, return_counts=True)
+        per_t.append({"values": values.tolist(), "counts": counts_t.tolist(), "none": int(len(final) - len(ok))})
+        out["curves"] = {"probe_rel_error": per_t}
     return out
 
 

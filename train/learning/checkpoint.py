@@ -14,11 +14,12 @@ from __future__ import annotations
 
 import hashlib
 import io
-import math
 import os
 import struct
-import tempfile
 from pathlib import Path
+
+from sim.output_files import write_atomic
+from train.learning.checkpoint_checks import finite, measurement_ok, state_problem
 
 FORMAT = "aesop-torch checkpoint"
 VERSION = 2
@@ -29,7 +30,6 @@ EXPERIMENT_KEYS = {"train_names": list, "probe_names": list, "orders": list, "se
                    "config": dict, "t": int, "records": list, "outcomes": dict, "probes": dict, "agent": dict}
 OUTCOME_KEYS = {"measurement", "observed_cm3", "archimedes_cm3", "goal_before", "goal_after", "sank"}
 OUTCOME_OPTIONAL = {"true"}   # the file's values, kept for the logs
-MEASUREMENT_LENGTHS = {"rgb": 3, "extent_cm": 3, "fill": None, "mass_g": None}
 
 
 class CheckpointError(ValueError):
@@ -43,21 +43,11 @@ def _write_bytes(f, data: bytes) -> None:
 
 
 def _write_atomic(path: str | os.PathLike, data: bytes) -> None:
+    """sim.output_files.write_atomic, its temporary file `<name>.<random>.tmp` (train/runner/out_dir.py knows a killed
+    write's leftovers by it), through _write_bytes (tests stand a full disk in its place)."""
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            _write_bytes(f, data)
-            f.flush()
-            os.fsync(f.fileno())
-        umask = os.umask(0)
-        os.umask(umask)
-        os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes it private; an output file is as readable as any other
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    write_atomic(path, data, hidden=False, write=lambda f, d: _write_bytes(f, d))
 
 
 def save_atomic(state: dict, path: str | os.PathLike) -> None:
@@ -139,7 +129,7 @@ def load(path: str | os.PathLike) -> dict:
                               ) from None
     if isinstance(raw, dict) and set(raw) == {"run", "experiment"}:
         raise CheckpointError(f"{path} is a checkpoint of an older version, without a checksum: remake it, or "
-                              f"convert it if you trust it (train.checkpoint.upgrade)")
+                              f"convert it if you trust it (train.learning.checkpoint.upgrade)")
     if not isinstance(raw, dict) or raw.get("format") != FORMAT:
         raise CheckpointError(f"{path} is not an aesop-torch checkpoint (no format tag {FORMAT!r})")
     if raw.get("version") != VERSION:
@@ -160,7 +150,6 @@ def load(path: str | os.PathLike) -> dict:
     problem = structure_problem(state, size)
     if problem:
         raise CheckpointError(f"{path}: wrong structure: {problem}")
-    from train.checkpoint_values import state_problem
     if problem := state_problem(state["experiment"], state["run"]):
         raise CheckpointError(f"{path}: out of range: {problem}")
     return _in_memory(state)
@@ -255,10 +244,6 @@ def _in_memory(state):
     return state.clone() if isinstance(state, torch.Tensor) else state
 
 
-def _finite(x) -> bool:
-    return isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x)
-
-
 def structure_problem(state: dict, budget: int = MAX_BYTES) -> str | None:
     """What is wrong with a checkpoint's content (the first problem found), or None. Checks every key and type,
     that orders are permutations, records and outcomes fit the episodes done, and that the agents' tensors have
@@ -290,12 +275,12 @@ def structure_problem(state: dict, budget: int = MAX_BYTES) -> str | None:
         return f"records must hold {e['t']} episode(s) for each of the {len(e['orders'])} orders"
     for name, o in list(e["outcomes"].items()):
         keys_ok = isinstance(o, dict) and OUTCOME_KEYS <= set(o) <= OUTCOME_KEYS | OUTCOME_OPTIONAL
-        if name not in names or not keys_ok or not isinstance(o["sank"], bool) or not _measurement_ok(
-                o["measurement"]) or not (_finite(o["observed_cm3"]) and _finite(o["archimedes_cm3"])):
+        if name not in names or not keys_ok or not isinstance(o["sank"], bool) or not measurement_ok(
+                o["measurement"]) or not (finite(o["observed_cm3"]) and finite(o["archimedes_cm3"])):
             return f"outcome of {name!r} is malformed"
     for name, pr in list(e["probes"].items()):
         if name not in probes or not isinstance(pr, dict) or set(pr) != {"measurement", "archimedes_cm3"} \
-                or not _measurement_ok(pr["measurement"]) or not _finite(pr["archimedes_cm3"]):
+                or not measurement_ok(pr["measurement"]) or not finite(pr["archimedes_cm3"]):
             return f"probe {name!r} is malformed"
     if e["physics"] == "cached" and e["t"] > 0:
         missing = {names[o[i]] for o in e["orders"] for i in range(e["t"])} - set(e["outcomes"])
@@ -304,23 +289,11 @@ def structure_problem(state: dict, budget: int = MAX_BYTES) -> str | None:
     return _agent_problem(e, budget)
 
 
-def _measurement_ok(m) -> bool:
-    if not isinstance(m, dict) or set(m) != set(MEASUREMENT_LENGTHS):
-        return False
-    for k, length in MEASUREMENT_LENGTHS.items():
-        v = m[k]
-        if length is None and not _finite(v):
-            return False
-        if length is not None and not (isinstance(v, list) and len(v) == length and all(map(_finite, v))):
-            return False
-    return True
-
-
 def _agent_problem(e: dict, budget: int) -> str | None:
     import torch
 
     from aesop_torch.agent import Agent, AgentConfig
-    from train.config import ConfigError, apply_overrides
+    from train.common.config import ConfigError, apply_overrides
     try:
         # the config's own validation (types, ranges, each dataclass's __post_init__), as for --config and --set
         config = apply_overrides(AgentConfig.named(e["config"].get("model")), e["config"])
@@ -329,7 +302,7 @@ def _agent_problem(e: dict, budget: int) -> str | None:
     except Exception as err:  # noqa: BLE001  a foreign config can fail in many ways
         return f"config is not an agent's config ({type(err).__name__})"
     try:
-        # the agents as train.experiment.Experiment builds them (its __post_init__: seed, buffers sized to the train
+        # the agents as train.learning.experiment.Experiment builds them (its __post_init__: seed, buffers sized to the train
         # objects), without importing it (it imports this module)
         config.seed = e["seed"]
         config.memory.max_episodes = min(config.memory.max_episodes, len(e["train_names"]))

@@ -15,7 +15,8 @@ import re
 import stat
 from pathlib import Path
 
-from train.endings import UsageError
+from train.common.exits import UsageError
+from train.common.out_checks import link_inside, refuse_uncreatable, refuse_unusable, refuse_unwritable
 
 LOCK_NAME = ".lock"
 CONFIG_NAME = "config.json"   # the run's config, written when it starts (summary.json's `config`)
@@ -24,46 +25,20 @@ WRITTEN = ("tb", "checkpoints", "frames", CONFIG_NAME, RUN_NAME, "summary.json",
 
 
 def check_out(out: Path, resume: bool) -> None:
-    """Refuse an --out that is not, or cannot become, a directory this run may write (nothing is created here)."""
-    if out.is_symlink() and not out.exists():
-        raise UsageError(f"--out {out} is a symbolic link to nothing ({os.readlink(out)})")
-    if out.exists() and not out.is_dir():
-        raise UsageError(f"--out {out} exists and is not a directory")
+    """Refuse an --out that is not, or cannot become, a directory this run may write (nothing is created here): the
+    checks every --out gets (train/common/out_checks.py), and the run's own."""
+    refuse_unusable(out)
     if resume:
         if not out.is_dir():
-            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist)")
-    else:
-        p = out
-        while not p.exists():
-            if p.is_symlink():
-                raise UsageError(f"--out {out}: {p} is a symbolic link to nothing")
-            p = p.parent
-        if not p.is_dir():
-            raise UsageError(f"--out {out}: {p} is not a directory")
-        if not os.access(p, os.W_OK | os.X_OK):
-            raise UsageError(f"--out {out}: {p} is not writable")
-        if p == out and holds_a_run(out):
-            busy = lock_holder(out)
-            raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else
-                             f"--out {out} already holds files; use --resume to continue it or another --out")
-    if out.is_dir() and not os.access(out, os.W_OK | os.X_OK):
-        raise UsageError(f"--out {out} is not writable")
-    if resume and (link := link_inside(out)):
+            raise UsageError(f"--resume: no checkpoint at {out / 'checkpoints' / 'latest.pt'} ({out} does not exist): "
+                             "nothing to continue; start the run without --resume")
+    elif refuse_uncreatable(out) == out and holds_a_run(out):
+        busy = lock_holder(out)
+        raise UsageError(f"--out {out} is in use by another run (pid {busy})" if busy else
+                         f"--out {out} already holds files; use --resume to continue it or another --out")
+    refuse_unwritable(out)
+    if resume and (link := link_inside(out, WRITTEN)):
         raise UsageError(f"--resume: {link} is a symbolic link; the run writes only inside --out {out}: remove it")
-
-
-def link_inside(out: Path) -> Path | None:
-    """The first symbolic link among what the run writes in --out (a link would send its writes elsewhere)."""
-    for name in WRITTEN:
-        top = out / name
-        if top.is_symlink():
-            return top
-        if top.is_dir():
-            for root, dirs, files in os.walk(top):   # does not follow links
-                for n in dirs + files:
-                    if (Path(root) / n).is_symlink():
-                        return Path(root) / n
-    return None
 
 
 def _leftover(out: Path, entry) -> bool:

@@ -36,7 +36,7 @@ from aesop_torch.encoders import GOAL_WORDS
 from aesop_torch.rules import contradiction
 from sim.objects import DEFAULT_GOAL
 from sim.trial import fewest_drops, optimal_first, random_drops_mean, reach_cm3
-from train.experiment import stack_measurements
+from train.learning.experiment import stack_measurements
 
 TRIAL_SEED = 0x7121A1   # mixed into the run's seed for the novice's random choices
 
@@ -225,8 +225,8 @@ TRIAL_OUTCOME_KEYS = ("observed_cm3", "goal_before", "goal_after", "sank", "meas
 def outcome_dict(outcome) -> dict:
     """The part of a world EpisodeOutcome a trial keeps (TRIAL_OUTCOME_KEYS). A goal trial's drop that was not
     delivered into the jar, or read a non-finite or negative volume, ends the run in one line (BadOutcome, as an
-    episode's: train.experiment.check_outcome) rather than teach the agent what the world did not do."""
-    from train.experiment import BadOutcome, plain_measurement
+    episode's: train.learning.experiment.check_outcome) rather than teach the agent what the world did not do."""
+    from train.learning.experiment import BadOutcome, plain_measurement
     cm3 = float(outcome.observed_cm3)
     if getattr(outcome, "delivered", True) is False or not math.isfinite(cm3) or cm3 < 0:
         raise BadOutcome(f"a goal trial's drop of {getattr(outcome, 'name', 'an object')!r} was not delivered into "
@@ -260,7 +260,7 @@ def play_trials(exp, objects, physics=None, first_drops: dict | None = None, pro
     trials use).
 
     Drops are cached by the sequence dropped so far in the trial (agents that chose alike share them); each round's
-    new sequences are simulated together on `physics` (train.physics.Physics: the runner's worker pool; default one
+    new sequences are simulated together on `physics` (train.learning.sim_pool.Physics: the runner's worker pool; default one
     in this process, closed after), each from a fresh jar. first_drops: name -> outcome record of that object dropped
     into a fresh jar of this world with this seed (the runner's cached exploration drops, and the drops that measured
     its probes that wait on a stand): a trial's first drop of it is that same drop, bit for bit
@@ -268,7 +268,7 @@ def play_trials(exp, objects, physics=None, first_drops: dict | None = None, pro
     (Physics.ahead, e.g. of planner_sequences): taken instead of simulating that sequence when an agent drops it.
     Neither changes an outcome: each sequence starts from a fresh jar wherever and whenever it is simulated."""
     from sim.objects import archimedes_cm3
-    from train.physics import Physics
+    from train.learning.sim_pool import Physics
 
     own = physics is None
     physics = Physics(objects, seed=exp.seed, workers=1) if own else physics

@@ -1,7 +1,7 @@
 """Settings that are each in range but together cannot give a run its result, refused before anything is written.
 
-train.config checks each key alone (its type, its RANGES); sim.world.World and sim.water.Tank refuse a scene they
-cannot build (train.config.check_world). What is left is settings that build a world which then measures nothing,
+train.common.config checks each key alone (its type, its RANGES); sim.world.World and sim.water.Tank refuse a scene they
+cannot build (train.common.config.check_world). What is left is settings that build a world which then measures nothing,
 or the wrong thing, or runs for ever:
 
 - the jar or the stand off the table, or through each other;
@@ -11,12 +11,17 @@ or the wrong thing, or runs for ever:
 - the cameras' depth range does not hold the object (near >= far, or the object outside it);
 - the encoder's range of sizes or masses excludes the objects (an object far outside lights no unit of its map);
 - the senses' noise swamps what they measure (the level's against the smallest object's rise, the hand's against
-  the heaviest object's mass);
+  the heaviest object's mass), or their resolution does (the level read in steps coarser than a quarter of the
+  smallest rise), or their floor does (a felt mass floored above the lightest object's mass);
+- gravity of the world and of the water's forces not the same (the water's buoyancy assumes the world's);
+- water too thin to float the green ball, or light enough that an object's displacement overflows the jar;
+- the rules' strengths or tolerances in the wrong order (knowledge that says the reverse of its name);
+- a context property on a jar run (the jar shows none: a map that never sees anything);
 - the water's explicit buoyancy cannot follow the lightest object the objects file admits (time step and density
   together);
 - a wait of the simulator (a move, a settle) longer than WAIT_STEPS steps: hours of stepping, not a result.
 
-`check_run(run_config, objects)` raises train.config.ConfigError: one line naming every setting involved (and the
+`check_run(run_config, objects)` raises train.common.config.ConfigError: one line naming every setting involved (and the
 object, where one decides it), `key` the first of them, the one the runner names the origin of.
 """
 
@@ -25,7 +30,7 @@ from __future__ import annotations
 import functools
 import math
 
-from train.config import ConfigError
+from train.common.config import ConfigError
 
 # the longest wait of the simulator: 1000 s of simulated time at pybullet's default 1/240 s step, 100x the default
 # settle timeout and 250x the default move timeout; a step of the default scene with an object out took 0.6 ms
@@ -46,17 +51,19 @@ ENCODER_MARGIN = 0.5
 
 
 def check_run(config, objects, given=()) -> None:
-    """Every check of this module on a resolved train.config.RunConfig and the run's ObjectSet; ConfigError. `given`:
+    """Every check of this module on a resolved train.common.config.RunConfig and the run's ObjectSet; ConfigError. `given`:
     the keys the run set (its overrides); a refusal that names several settings takes as its `key` the first of
     them that was given, so that the runner says where it came from."""
-    from train.config import check_world
+    from train.common.config import check_world
     check_world(config.world, objects)
     world = config.world
     try:
-        for check in (_check_waits, _check_buoyancy, _check_camera, _check_noise, _check_timeout, _check_reach,
-                      _check_layout):
+        for check in (_check_waits, _check_gravity, _check_buoyancy, _check_water, _check_camera, _check_noise,
+                      _check_timeout, _check_reach, _check_layout):
             check(world, objects)
         _check_encoder(config.agent, objects)
+        _check_knowledge(config.agent)
+        _check_sheet(config.agent, given)
     except _Joint as e:
         key = next((k for k in e.keys if any(g == k or k.startswith(g + ".") or g.startswith(k + ".")
                                              for g in given)), e.keys[0])
@@ -128,6 +135,38 @@ def _check_buoyancy(world, objects) -> None:
                      "lighter liquid)")
 
 
+def _check_gravity(world, objects) -> None:
+    tank = world.tank
+    if tank.water.gravity != tank.gravity:
+        raise _Joint(["world.tank.water.gravity", "world.tank.gravity"],
+                     f"{tank.water.gravity:g} m/s^2 is not world.tank.gravity "
+                     f"{tank.gravity:g} m/s^2: the water's buoyancy would hold up another weight than the one that "
+                     "pulls the object down (set both)")
+
+
+def _check_water(world, objects) -> None:
+    """The ball floats, and no object's displacement in this water (sim.objects.archimedes_cm3 at its density)
+    lifts the level over the rim (the objects file checks that at 1000 kg/m^3)."""
+    from sim.objects import archimedes_cm3
+
+    tank, jar = world.tank, objects.jar
+    density = tank.water.density / 1000.0   # g/cm^3
+    ball_cm3 = math.pi / 6 * tank.ball_diameter_cm ** 3
+    if tank.ball_mass_g / density >= ball_cm3:
+        raise _Joint(["world.tank.water.density", "world.tank.ball_mass_g", "world.tank.ball_diameter_cm"],
+                     f"{tank.water.density:g} kg/m^3 cannot float the green ball "
+                     f"(world.tank.ball_mass_g {tank.ball_mass_g:g} g in {ball_cm3:.1f} cm^3): the goal would lie on "
+                     "the bottom")
+    for o in _objects(objects):
+        v = archimedes_cm3(o, jar, density)
+        level = jar.water_depth_cm + v / jar.area_cm2
+        if level > jar.height_cm:
+            raise _Joint(["world.tank.water.density"],
+                         f"in water of {tank.water.density:g} kg/m^3 object '{o.name}' "
+                         f"displaces {v:.0f} cm^3, which would raise the water from {jar.water_depth_cm:g} to "
+                         f"{level:.1f} cm, over the jar's {jar.height_cm:g} cm rim")
+
+
 def _check_camera(world, objects) -> None:
     cam = world.camera
     if cam.near >= cam.far:
@@ -151,14 +190,28 @@ def _check_noise(world, objects) -> None:
     specs = _objects(objects)
     # an object displaces its mass of water afloat and its volume sunk (sim.objects.archimedes_cm3, without the
     # bottom's and the wall's few per cent); its rise is that over the jar's cross-section
-    smallest = min(specs, key=lambda o: min(o.mass_g, o.volume_cm3))
-    rise = min(smallest.mass_g, smallest.volume_cm3) / jar.area_cm2
+    density = world.tank.water.density / 1000.0   # g/cm^3: a floater displaces its mass of this water
+    smallest = min(specs, key=lambda o: min(o.mass_g / density, o.volume_cm3))
+    rise = min(smallest.mass_g / density, smallest.volume_cm3) / jar.area_cm2
     reading = world.level_noise_cm * math.sqrt(2.0)
     if NOISE_SIGMAS * reading > rise:
         raise _Joint(["world.level_noise_cm"],
                      f"{world.level_noise_cm:g} cm of noise on each level reading swamps the {rise:.3f} cm rise of "
                      f"object '{smallest.name}' (the smallest): at most {rise / NOISE_SIGMAS / math.sqrt(2.0):.4f} "
                      "cm, or a rise could read negative")
+    # a level read in steps of r misreads a rise (two readings, each rounded) by up to r: as with the noise, the
+    # smallest rise must be NOISE_SIGMAS of those deep (at 50 cm every reading was 0: every property irrelevant)
+    if NOISE_SIGMAS * world.level_resolution_cm > rise:
+        raise _Joint(["world.level_resolution_cm"],
+                     f"a level read in steps of {world.level_resolution_cm:g} cm reads the {rise:.3f} cm rise of "
+                     f"object '{smallest.name}' (the smallest) to within a step of itself: at most "
+                     f"{rise / NOISE_SIGMAS:.4f} cm")
+    lightest = min(specs, key=lambda o: o.mass_g)
+    if world.min_felt_mass_g > lightest.mass_g:
+        raise _Joint(["world.min_felt_mass_g"],
+                     f"{world.min_felt_mass_g:g} g is above the mass of object "
+                     f"'{lightest.name}' (the lightest, {lightest.mass_g:g} g): the hand would feel the floor, not "
+                     f"the object; at most {lightest.mass_g:g} g")
     heaviest = max(specs, key=lambda o: o.mass_g)
     if NOISE_SIGMAS * world.mass_noise_g > heaviest.mass_g:
         raise _Joint(["world.mass_noise_g"],
@@ -295,3 +348,56 @@ def _check_encoder(agent, objects) -> None:
                 raise _Joint([lo_key, hi_key] if u < 0 else [hi_key, lo_key],
                              f"the encoder's {what}s {lo_key} {lo:g} .. {hi_key} {hi:g} {unit} exclude object "
                              f"'{o.name}' ({what} {value(o):.3g} {unit}): its map could not tell it from nothing")
+
+
+def _check_knowledge(agent) -> None:
+    """The rules' strengths in the order their names give them (the paper: Elimination "drastically" reduces a
+    pathway, so that it no longer retro-activates, Uncertainty "marginally", Growth strengthens), and the outcome's
+    "as expected" tolerance inside its "contradicted" one; in any other order the knowledge read off the strengths
+    says the reverse of what was learned (eliminated_strength 5 with dominant_strength 0.01: every eliminated
+    property recalled above the causal one). A run whose context the jar does not show: refused too."""
+    r = agent.rules
+    chain = [("rules.eliminated_strength", r.eliminated_strength), "<=", ("retro_floor", agent.retro_floor), "<",
+             ("rules.uncertain_floor", r.uncertain_floor), "<=", (None, 1.0), "<",
+             ("rules.dominant_strength", r.dominant_strength)]
+    said = " ".join(x if isinstance(x, str) else x[0] or "1" for x in chain)
+    for i in range(0, len(chain) - 2, 2):
+        (ka, a), op, (kb, b) = chain[i:i + 3]
+        if not (a <= b if op == "<=" else a < b):
+            name = lambda k, v: f"{k} {v:g}" if k else "1"   # noqa: E731
+            raise _Joint([k for k in (ka, kb) if k],
+                         f"{name(ka, a)} is not {op} {name(kb, b)}: a pathway's strengths keep the order {said} (an "
+                         "eliminated pathway no longer retro-activates, an undecided one does, a dominant one leads)")
+    for same, contra in (("same_abs_cm3", "contradiction_abs_cm3"), ("same_rel", "contradiction_rel")):
+        if getattr(r, same) > getattr(r, contra):
+            raise _Joint([f"rules.{same}", f"rules.{contra}"],
+                         f"rules.{same} {getattr(r, same):g} is above rules.{contra} {getattr(r, contra):g}: an "
+                         "outcome is contradicted only beyond what is as expected")
+    if agent.encoder.context:
+        raise _Joint(["encoder.context"],
+                     f"{list(agent.encoder.context)}: a jar run perceives no context (only a task "
+                     "file's apparatus shows one), so its map would never see anything; leave it empty")
+
+
+def _check_sheet(agent, given) -> None:
+    """The sheet's rows as the agent writes and cues them (aesop_torch.agent_config: OBJECT_ROWS, AGENT_ROW_K), which
+    train.common.config checks only for its size: other cue rows take a cue of another size, and a row's k-WTA of
+    another k than the neurons the agent writes there refuses the first episode stored, both mid-run."""
+    from aesop_torch.agent_config import AGENT_ROW_K, OBJECT_ROWS
+
+    hub, memory = agent.hub, agent.memory
+    if tuple(memory.cue_rows) != OBJECT_ROWS:
+        raise _Joint(["memory.cue_rows"], f"the agent cues recall with its object hub, the sheet's rows "
+                                          f"{list(OBJECT_ROWS)}, got {list(memory.cue_rows)}")
+    # an object row holds the hub's assembly_size neurons, the reward's rows one unit each, an event's row its code's
+    # two neurons
+    want = tuple(hub.assembly_size if r in OBJECT_ROWS else k for r, k in enumerate(AGENT_ROW_K))
+    if tuple(memory.row_k[:len(want)]) != want:
+        r = next(r for r, (a, b) in enumerate(zip(memory.row_k, want)) if a != b)
+        keys = ["hub.assembly_size", "memory.row_k"] if r in OBJECT_ROWS and "memory.row_k" not in given else \
+            ["memory.row_k", "hub.assembly_size"]
+        raise _Joint(keys, f"row {r} of the agent's episodes holds {want[r]} active neuron(s) "
+                           f"({'hub.assembly_size, on an object row' if r in OBJECT_ROWS else 'its code'}), but "
+                           f"memory.row_k gives it {memory.row_k[r]}: memory.row_k must begin {list(want)}")
+    if hub.word_map != "word":
+        raise _Joint(["hub.word_map"], f"the agent hears names on its map 'word', got {hub.word_map!r}")
