@@ -80,8 +80,8 @@ class Anticipation:
     recall: object           # memory.Recall
     acts: torch.Tensor       # (B, P_all, U) bottom-up map activities
     present: torch.Tensor    # (B, P_all)
-    values: dict             # map name -> (B, dim) decoded bottom-up values
-    recalled_values: dict    # map name -> (B, K, dim) values each recalled episode retro-activates
+    values: dict | None      # map name -> (B, dim) decoded bottom-up values (None: not asked for, see anticipate_acts)
+    recalled_values: dict | None   # map name -> (B, K, dim) values each recalled episode retro-activates (or None)
     fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
     by_fate: torch.Tensor    # (B, 2) what it would displace if it floats, if it sinks (NaN: no episode of that fate)
     p_sink: torch.Tensor     # (B,) how likely it sinks, by the recalled fates; `expected` takes the likelier fate
@@ -229,14 +229,20 @@ class Agent(nn.Module):
         return fitted_readout.readout_features(values, self.config.encoder)
 
     @torch.no_grad()
-    def anticipate(self, measurement: dict) -> "Anticipation":
+    def anticipate(self, measurement: dict, decoded: bool = True) -> "Anticipation":
         """Perceive, recall and read out the expected displacement; learns nothing."""
-        return self.anticipate_acts(*self.activities(measurement))
+        return self.anticipate_acts(*self.activities(measurement), decoded=decoded)
 
     @torch.no_grad()
-    def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor) -> "Anticipation":
-        """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all)."""
-        values = self.decode(acts)
+    def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor, decoded: bool = True) -> "Anticipation":
+        """`anticipate` from map activities (B, P_all, U) and which maps have input (B, P_all). decoded=False: the
+        values (seen and recalled) are decoded only if the readout reads them, else left None: a caller that wants
+        only the prediction (probes, goal trials, a population's curves) spares the decoding, a least-squares fit
+        per map and agent that was a third of a population's probe readings under the paper's average readout. The
+        prediction is the same bit for bit either way."""
+        readout = "average" if "fit" in self.config.ablate else self.config.readout
+        decoded = decoded or readout in ("prior_fit", "local_fit")
+        values = self.decode(acts) if decoded else None
         p_sink = None
         if self._fates_seen():
             # recall in two steps: the cue through what decides the fate recalls episodes whose fates vote for the
@@ -249,9 +255,8 @@ class Agent(nn.Module):
             recall = self.memory.recall(self._cue(acts, present))
         rewards = self.reward.decode(self._reward_row(recall.episodes))           # (B, K), NaN where not valid
         fates = self._fates(recall)
-        recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes)))
+        recalled = self.decode(self.retro_activate(self._assemblies(recall.episodes))) if decoded else None
         strength = recall.strength * recall.valid
-        readout = "average" if "fit" in self.config.ablate else self.config.readout
         nan = torch.full((self.batch,), float("nan"))
         by_fate, p_out = torch.stack([nan, nan], 1), nan
         if readout == "prior_fit":
@@ -462,7 +467,7 @@ class Agent(nn.Module):
 
     def predict(self, measurement: dict) -> torch.Tensor:
         """Expected displaced volume (cm^3) for an object, learning frozen; NaN when nothing is recalled."""
-        return self.anticipate(measurement).expected
+        return self.anticipate(measurement, decoded=False).expected
 
     def delta_property(self, values: dict, recalled: dict, strength: torch.Tensor | None = None
                        ) -> tuple[torch.Tensor, torch.Tensor]:

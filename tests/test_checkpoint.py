@@ -40,6 +40,9 @@ class FakePhysics:
     def submit(self, jobs):
         return map(self._answer, jobs)
 
+    def submit_early(self, jobs):   # Physics hands a new run's measurements over early; here submit answers them
+        pass
+
     def _answer(self, job):
         kind, name, _ = job
         if kind == "inspect":

@@ -224,7 +224,7 @@ def test_per_episode_physics_for_a_population_is_refused_before_anything_is_writ
     assert not out.exists()
 
 
-def test_an_object_in_the_files_schema_is_predicted_as_its_measurement(tmp_path):
+def test_an_object_in_the_files_schema_is_predicted_as_its_measurement(tmp_path, capsys):
     """One schema for an object: Experiment.predict takes the objects file's {shape, color, dims_cm, mass_g} (perceived
     exactly) as it takes a measurement, refuses what the file would refuse, and train/ask.py --objects predicts a
     whole file against Archimedes."""
@@ -238,14 +238,19 @@ def test_an_object_in_the_files_schema_is_predicted_as_its_measurement(tmp_path)
     objects = tmp_path / "two.json"
     objects.write_text(json.dumps({"train": [{"name": "green_heavy_cylinder", **spec}],
                                    "probe": [{"name": "light", **spec, "mass_g": 14}]}))
-    ask = [sys.executable, str(ROOT / "train" / "ask.py"), str(ROOT / "checkpoints" / "default.pt")]
-    r = subprocess.run(ask + ["--objects", str(objects)], capture_output=True, text=True, timeout=60)
-    lines = r.stdout.strip().splitlines()
-    assert r.returncode == 0 and len(lines) == 3 and lines[0].startswith("green_heavy_cylinder: expected")
+    # the command's main() in this process (tests/test_trials.py runs the script itself): no interpreter and
+    # torch import per call
+    from train.ask import main as ask
+    capsys.readouterr()
+    code = ask([str(ROOT / "checkpoints" / "default.pt"), "--objects", str(objects)])
+    out, err = capsys.readouterr()
+    lines = out.strip().splitlines()
+    assert code == 0 and len(lines) == 3 and lines[0].startswith("green_heavy_cylinder: expected")
     assert "Archimedes 365.3" in lines[0] and lines[-1].startswith("median_rel_error=")
     objects.write_text('{"train": [{"name": "x", "shape": "cube", "color": "red", "dims_cm": [5], "mass_g": 0}]}')
-    r = subprocess.run(ask + ["--objects", str(objects)], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "mass_g" in r.stderr
+    code = ask([str(ROOT / "checkpoints" / "default.pt"), "--objects", str(objects)])
+    out, err = capsys.readouterr()
+    assert code == 2 and len(err.strip().splitlines()) == 1 and "mass_g" in err
 
 
 def test_summary_says_what_the_extended_knowledge_rests_on():

@@ -112,15 +112,18 @@ def closed_form_outcomes(objects, reachable_above_cm3: float = 200.0, sensor=Non
     return outcomes, probes
 
 
-def draw_orders(n_objects: int, orders: str, seed: int) -> list[list[int]]:
-    """'listed' -> the file's order; 'all' -> every permutation; 'N' -> N random orders from the seed."""
+def draw_orders(n_objects: int, orders: str, seed: int, limit: int | None = None) -> list[list[int]]:
+    """'listed' -> the file's order; 'all' -> every permutation; 'N' -> N random orders from the seed. limit: the
+    first `limit` of them only, the same as the full draw's first (the runner's detailed orders: 64 of 9! are not
+    worth drawing all 362,880)."""
+    import itertools
     if orders == "listed":
         return [list(range(n_objects))]
     if orders == "all":
-        import itertools
-        return [list(p) for p in itertools.permutations(range(n_objects))]
+        return [list(p) for p in itertools.islice(itertools.permutations(range(n_objects)), limit)]
     g = torch.Generator().manual_seed(seed)
-    return [torch.randperm(n_objects, generator=g).tolist() for _ in range(int(orders))]
+    count = int(orders) if limit is None else min(int(orders), limit)
+    return [torch.randperm(n_objects, generator=g).tolist() for _ in range(count)]
 
 
 def median_rel_error(predicted: torch.Tensor, truth: torch.Tensor) -> float | None:
@@ -269,7 +272,7 @@ class Experiment:
                     for name in self.probe_names]
             acts, present = (torch.stack([s[i] for s in seen], 1).flatten(0, 1) for i in (0, 1))   # order-major
             agents = self.agent.select(torch.arange(B).repeat_interleave(n))
-            return agents.anticipate_acts(acts, present).expected.view(B, n)
+            return agents.anticipate_acts(acts, present, decoded=False).expected.view(B, n)
 
     def probe_errors(self) -> list[float | None]:
         pred = self.probe_predictions()

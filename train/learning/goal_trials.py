@@ -151,7 +151,7 @@ def run_trials(agent: Agent, stands: list[tuple], measurements: dict, drop, jar,
                 ms = [measurements[left[b][j]] if active[b] and j < len(left[b]) else measurements[stand[0]]
                       for b in range(B)]
                 a = agent.anticipate(_with_names(ms, [left[b][j] if active[b] and j < len(left[b]) else stand[0]
-                                                      for b in range(B)], names))
+                                                      for b in range(B)], names), decoded=False)
                 exp[:, j] = a.expected
                 # over both fates where both have a fit, each at the probability the agent gives it
                 both = a.p_sink * a.by_fate[:, 1] + (1 - a.p_sink) * a.by_fate[:, 0]

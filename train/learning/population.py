@@ -278,6 +278,21 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     return out
 
 
+def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
+               config: AgentConfig) -> dict:
+    """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
+    "final_probe_cm3": what the runner asks of its figure process (train/runner/loop.py), which runs it beside the
+    detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
+    from aesop_torch.malloc import keep_freed_memory
+    from train.learning.experiment import draw_orders
+
+    keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
+    out = run_population(train_names, probe_names, draw_orders(len(train_names), orders, seed), outcomes, probes,
+                         config, curves=True)
+    del out["final_probe_cm3"]
+    return out
+
+
 def _run_active(train_names, probe_names, orders: torch.Tensor, outcomes: dict, probes: dict, config: AgentConfig,
                 chunk: int, progress, curves: bool, t0: float) -> dict:
     """run_population's answer when the robot chooses its next object (AgentConfig.explore "active",
@@ -583,6 +598,6 @@ class _Walk:
     def _probe_predictions(self, agents: Agent) -> torch.Tensor:
         """(B, n_probes) what each agent expects every probe to displace, learning frozen (as Experiment's)."""
         B = agents.batch
-        cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1)).expected
-                for acts, present in self.probe_acts]
+        cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1), decoded=False
+                                       ).expected for acts, present in self.probe_acts]
         return torch.stack(cols, dim=1) if cols else torch.zeros(B, 0)

@@ -277,6 +277,7 @@ class Physics:
         self.objects, self.seed, self.gui, self.world_config = objects, seed, gui, world
         self.workers = 1 if gui else (workers or cores())
         self._pool = self._world = None
+        self._early = None   # (jobs, their results) handed over by submit_early, for submit to take up
 
     def start(self) -> None:
         """Fork the workers now (each imports the simulator and builds its world while the caller goes on)."""
@@ -289,11 +290,20 @@ class Physics:
 
     def submit(self, jobs: list[tuple]):
         """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited
-        for as it is taken). jobs: ("drop", name, record), ("inspect", name, None) or ("trial", names, record)."""
+        for as it is taken). jobs: ("drop", name, record), ("inspect", name, None) or ("trial", names, record).
+        The same jobs as submit_early's: the results it started."""
+        if self._early is not None and self._early[0] == list(jobs):
+            early, self._early = self._early[1], None
+            return early
         if self.workers == 1:
             return map(self._here, jobs)   # lazy: each job is simulated when its result is taken
         self.start()
         return self._pool.imap(_task, jobs, chunksize=1)
+
+    def submit_early(self, jobs: list[tuple]) -> None:
+        """submit(jobs) now, its results kept for the submit (or run) of the same jobs later: the runner hands over
+        its first simulations as soon as the workers are forked, before it has built what it will use them for."""
+        self._early = (list(jobs), self.submit(jobs))
 
     def _here(self, job: tuple):
         if self._world is None:

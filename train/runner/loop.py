@@ -79,9 +79,14 @@ def prepare(args, objects, n_orders: int, physics=None):
             raise UsageError(f"--out {args.out} already holds files; use --resume to continue it or another --out")
         remove_leftovers(args.out)
         # more than FULL_RUNS orders: the first FULL_RUNS run in detail here, every order as a population at the end
-        orders = draw_orders(len(objects.train), args.orders, args.seed)[:FULL_RUNS]
+        orders = draw_orders(len(objects.train), args.orders, args.seed, limit=FULL_RUNS)
         if physics is not None:
             physics.start()
+            # the measurements are handed over now: the workers simulate while the experiment is built (its maps'
+            # training) and its first checkpoint written, which they waited for before (_run takes them up)
+            physics.submit_early(measurement_jobs(objects, [o.name for o in objects.train],
+                                                  [o.name for o in objects.probe], {}, {}, args.physics,
+                                                  args.frames)[-1])
         # a copy: the experiment sizes its agents' buffers to the train objects in its config (train.learning.experiment)
         config = copy.deepcopy(args.run_config.agent)
         try:
@@ -171,10 +176,10 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     from sim.objects import archimedes_cm3
     from train.learning.checkpoint import save_atomic, write_text_atomic
     from train.common.config import RunConfig, config_dict
-    from train.learning.experiment import draw_orders, outcome_record, plain_measurement, senses_floor
+    from train.learning.experiment import draw_orders, outcome_record, plain_measurement
     from train.learning.sim_pool import Physics, WorkerDied
     from train.common.progress import Step
-    from train.runner.summary import build_summary, knowledge_table
+    from train.runner.summary import build_summary, knowledge_table, summary_text
     run_meta = {"objects": objects.canonical(), "seed": args.seed, "physics": args.physics,
                 "orders_arg": args.orders, "model": args.model, "ablate": args.ablate}
     # the whole config as the run uses it: the agents' as the experiment holds it (seed, buffers sized), the world's
@@ -196,13 +201,10 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
     # probe that waits on a trial's stand is measured by a drop instead: the same look, take, lift and weigh as an
     # inspection, so the same measurement bit for bit (tests/test_world.py), and a trial's first drop of it (the
     # agent learns nothing from it here)
-    todo = [n for n in dict.fromkeys(exp.train_names) if n not in exp.outcomes] if exp.physics == "cached" else []
-    probes = [n for n in exp.probe_names if n not in exp.probes]
-    on_stands = {n for stand in objects.trials for n in stand}
-    jobs = [("drop", n, args.frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
-                                                        for n in probes]
+    todo, probes, on_stands, jobs = measurement_jobs(objects, exp.train_names, exp.probe_names, exp.outcomes,
+                                                     exp.probes, exp.physics, args.frames)
     probe_drops = {}
-    submitted = physics.submit(jobs)   # the workers start on them while the logs open
+    submitted = physics.submit(jobs)   # the workers start on them while the logs open (a new run's: since prepare)
     from train.runner.tensorboard_log import OrderLog, trial_line   # tensorboard's import (0.2 s) too
     from train.learning.goal_trials import planner_sequences
     logs = _OPEN["logs"] = [OrderLog(out / "tb" / f"order_{b + 1:02d}", purge_step=(exp.t + 1) if resumed else None)
@@ -236,6 +238,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             exp.probes[name] = {"measurement": plain_measurement(m),
                                 "archimedes_cm3": float(archimedes_cm3(specs[name], objects.jar, density))}
         checkpoint()
+    # every order as a population (more than the detailed ones) runs on the figure process beside the detailed
+    # orders and the goal trials: it needs only the measured outcomes (cached physics: all in by now)
+    population_job = _start_population(args, exp)
     # the goal trials' multi-drop sequences a planner would drop, simulated while the workers would idle (the
     # agents learn here, Figure 2 and the trials follow): a well-taught agent drops them; others are simulated then
     ahead = {s: physics.ahead(("trial", s, None)) for s in planner_sequences(objects)[:physics.workers]} \
@@ -265,22 +270,18 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
             bar.line(f"episode {exp.t}/{exp.n_episodes}: {recs[0]['object']} {fired}")
             if not per_episode:
                 bar.update(1, recs[0]["object"])
-    population = None
-    orders = draw_orders(len(exp.train_names), args.orders, args.seed)
-    if len(orders) > len(exp.orders):
-        from train.learning.population import run_population
-        print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in detail)",
-              flush=True)
-        with Step("population", len(orders), "order") as bar:
-            population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
-                                        exp.config, progress=bar.to, curves=True)
-    # Figure 2 shows the exploration (a population's error bands over all its orders): drawn and written by the
-    # drawer while the goal trials run
-    start_drawer()   # main() started it
-    figure = _OPEN["drawer"].draw("train.runner.figures:save_figure2", exp.records, out / "figure2.png", 110,
-                                  senses_floor(exp.probes),
-                                  population and {k: population[k] for k in ("orders", "agree_fraction",
-                                                                             "most_common_knowledge", "curves")})
+    population = figure = None
+    if population_job is None:
+        orders = draw_orders(len(exp.train_names), args.orders, args.seed)
+        if len(orders) > len(exp.orders):   # not started above (outcomes measured per episode): here, in line
+            from train.learning.population import run_population
+            print(f"population: {len(orders)} orders side by side (the first {len(exp.orders)} also ran in "
+                  "detail)", flush=True)
+            with Step("population", len(orders), "order") as bar:
+                population = run_population(exp.train_names, exp.probe_names, orders, exp.outcomes, exp.probes,
+                                            exp.config, progress=bar.to, curves=True)
+        # Figure 2 shows the exploration: drawn and written by the drawer while the goal trials run
+        figure = _draw_figure(exp, out, population)
     if objects.trials:
         from train.learning.goal_trials import play_trials
         print(f"goal trials: {len(objects.trials)} trial(s) with each of {len(exp.orders)} order(s)' agents, the jar "
@@ -295,21 +296,74 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         for b, log in enumerate(logs):
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
+    if population_job is not None:   # the figure process ran it beside the trials: its result, then Figure 2
+        with Step("population", None, "order", announce=False):
+            try:
+                population = population_job.get()
+            except WorkerDied as e:
+                raise WorkerDied("the figure process", e.pid, e.exitcode) from None
+        print(f"population: done ({population['timing_s']['total']:.1f} s on the figure process)", flush=True)
+        figure = _draw_figure(exp, out, population)
     summary = build_summary(exp, population, config)
     try:
         image = figure.get()
     except WorkerDied as e:   # the drawer's pool names its process generically
         raise WorkerDied("the figure process", e.pid, e.exitcode) from None
+    shown = logs and logs[0].encoded("figure2", image)
     for log in logs:
-        log.image("figure2", image, exp.n_episodes)
+        log.shown(shown, exp.n_episodes)
         log.close()   # not quietly: a write error here is the run's (one line, exit code 1)
     _OPEN["logs"] = []
     close_quietly()   # the workers and the drawer: every result is in
-    write_text_atomic(json.dumps(summary, indent=1) + "\n", out / "summary.json")
+    write_text_atomic(summary_text(summary) + "\n", out / "summary.json")
     print(f"\nwrote {out}/: summary.json, config.json, figure2.png, tb/ (tensorboard --logdir {out / 'tb'}), "
           f"checkpoints/latest.pt" + (", frames/" if args.frames else "") + f"  [{time.time() - t0:.1f} s]")
     print(knowledge_table(summary))
     return 0
+
+
+def measurement_jobs(objects, train_names, probe_names, outcomes: dict, probes_done: dict, physics: str,
+                     frames: bool) -> tuple[list, list, set, list]:
+    """(train objects to drop, probes to measure, the objects on a trial's stand, the physics jobs) a run still
+    needs before its episodes: with cached physics each distinct train object not yet in `outcomes` dropped once,
+    each probe not yet in `probes_done` inspected (dropped, when it waits on a trial's stand)."""
+    todo = [n for n in dict.fromkeys(train_names) if n not in outcomes] if physics == "cached" else []
+    probes = [n for n in probe_names if n not in probes_done]
+    on_stands = {n for stand in objects.trials for n in stand}
+    jobs = [("drop", n, frames) for n in todo] + [("drop" if n in on_stands else "inspect", n, None)
+                                                  for n in probes]
+    return todo, probes, on_stands, jobs
+
+
+def _start_population(args, exp):
+    """Every order (when there are more than the detailed ones) as a population
+    (train.learning.population.run_orders) on the figure process, started now: an object whose get() waits for its
+    result; None when there is no population or its outcomes are not all measured yet (per-episode physics: _run
+    runs it in line at the end). The runner's own process then runs the detailed orders and the goal trials
+    meanwhile: all 9! orders of 9 objects took 23 of the run's 40 s, and the detailed orders and the trials another
+    9 s after it."""
+    from train.runner.settings import count_orders
+
+    if count_orders(len(exp.train_names), args.orders) <= len(exp.orders) or \
+            any(n not in exp.outcomes for n in exp.train_names):
+        return None
+    print(f"population: {count_orders(len(exp.train_names), args.orders)} orders side by side on the figure process "
+          f"(the first {len(exp.orders)} also run in detail here)", flush=True)
+    start_drawer()   # main() started it
+    return _OPEN["drawer"].draw("train.learning.population:run_orders", exp.train_names, exp.probe_names,
+                                args.orders, args.seed, exp.outcomes, exp.probes, exp.config)
+
+
+def _draw_figure(exp, out, population):
+    """Figure 2 (the exploration; a population's error bands over all its orders), drawn and written by the figure
+    process: an object whose get() waits for its image."""
+    from train.learning.experiment import senses_floor
+
+    start_drawer()   # main() started it
+    return _OPEN["drawer"].draw("train.runner.figures:save_figure2", exp.records, out / "figure2.png", 110,
+                                senses_floor(exp.probes),
+                                population and {k: population[k] for k in ("orders", "agree_fraction",
+                                                                           "most_common_knowledge", "curves")})
 
 
 def _flat(prefix: str, d: dict) -> dict:

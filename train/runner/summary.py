@@ -14,6 +14,7 @@ ran it and the world's; `commit` names the code (`git describe --always --dirty`
 from __future__ import annotations
 
 import importlib.metadata
+import json
 import math
 import os
 import subprocess
@@ -99,6 +100,34 @@ def build_summary(exp, population: dict | None = None, config: dict | None = Non
             "final_probe_rel_error": population["final_probe_rel_error"],
         }
     return json_safe(summary)
+
+
+def summary_text(summary: dict) -> str:
+    """json.dumps(summary, indent=1), the same text, faster: with an indent json.dumps encodes in Python, item by
+    item; without one, in C. The population's two lists of every order (362,880 keys and errors for 9 objects) are
+    encoded so, one item a line one space deeper than their key as the indent would put them (the item separator a
+    comma, a newline and that indent), in place of a placeholder the indented dump wrote."""
+    pop = summary.get("population")
+    lists = {k: pop[k] for k in ("final_knowledge", "final_probe_rel_error")
+             if isinstance(pop, dict) and isinstance(pop.get(k), list)}
+    if not lists or not all({type(v) for v in items} <= _SCALARS for items in lists.values()):
+        return json.dumps(summary, indent=1)
+    marks = {k: f"@@summary_text:{k}@@" for k in lists}
+    text = json.dumps({**summary, "population": {**pop, **marks}}, indent=1)
+    for key, mark in marks.items():
+        quoted = json.dumps(mark)
+        at = text.find(quoted)
+        if at < 0 or text.find(quoted, at + 1) >= 0:   # a mark that is also someone's value: the plain way
+            return json.dumps(summary, indent=1)
+        depth = at - text.rfind("\n", 0, at) - 1 - len(json.dumps(key) + ": ")
+        items = lists[key]
+        inner = json.dumps(items, separators=(",\n" + " " * (depth + 1), ": "))[1:-1]   # scalars: no nesting
+        body = f"[\n{' ' * (depth + 1)}{inner}\n{' ' * depth}]" if items else "[]"
+        text = text[:at] + body + text[at + len(quoted):]
+    return text
+
+
+_SCALARS = {str, int, float, bool, type(None)}   # what json writes alike with and without an indent
 
 
 def json_safe(x):

@@ -20,6 +20,7 @@ from pathlib import Path
 from tensorboard.summary.writer.event_file_writer import _AsyncWriterThread
 from torch.utils.tensorboard import SummaryWriter
 from torch.utils.tensorboard.summary import hparams
+from torch.utils.tensorboard.summary import image as image_summary
 
 from aesop_torch.encoders import object_properties
 from aesop_torch.rules import RULE_NAMES
@@ -121,6 +122,17 @@ class OrderLog:
         """An (H, W, 3) uint8 image at step."""
         with self._named():
             self.writer.add_image(tag, image, step, dataformats="HWC")
+
+    @staticmethod
+    def encoded(tag: str, image):
+        """An (H, W, 3) uint8 image as SummaryWriter.add_image encodes it (a PNG): the runner encodes Figure 2 once
+        for all its orders' logs (`shown`), not once per log."""
+        return image_summary(tag, image, dataformats="HWC")
+
+    def shown(self, encoded, step: int) -> None:
+        """An image `encoded` gave, at step: what image(tag, image, step) writes."""
+        with self._named():
+            self.writer.file_writer.add_summary(encoded, step)
 
     def close(self) -> None:
         with self._named():
