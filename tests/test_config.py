@@ -287,3 +287,14 @@ def test_versions_of_the_libraries():
     v = versions()
     assert set(v) == {"torch", "pybullet", "numpy"} and all(isinstance(x, str) and x for x in v.values())
     assert v["torch"] == str(torch.__version__) and v["numpy"] == numpy.__version__ and v["pybullet"] != "unknown"
+
+
+def test_a_refused_long_value_is_quoted_cut_to_the_contracts_length():
+    """CONTRACTS.md: a refused value is cut to 60 characters, in a --set value and a command-line word alike."""
+    from sim.input_files import MAX_SHOWN
+    from train.runner.settings import shown
+    with pytest.raises(ConfigError) as e:
+        parse_set("x" * 200)           # no "=": refused, the text quoted
+    quoted = str(e.value).rsplit("got ", 1)[1]
+    assert quoted == repr("x" * (MAX_SHOWN - 3) + "...") and MAX_SHOWN == 60
+    assert shown("9" * 200) == repr("9" * 57 + "...") and shown("9" * 60) == repr("9" * 60)

@@ -375,8 +375,9 @@ def test_the_runners_tables_of_models_and_ablations_are_the_agents():
     """train/common/models.py keeps a copy of them, to refuse a bad --model or --ablate before torch is imported
     (the runner's and the sweeps' one table)."""
     from aesop_torch.agent import ABLATIONS, MODELS
+    from aesop_torch.exploration import EXPLORE
     from train.common import models
-    assert models.MODELS == MODELS and models.ABLATIONS == ABLATIONS
+    assert models.MODELS == MODELS and models.ABLATIONS == ABLATIONS and models.EXPLORE == EXPLORE
 
 
 # -- what the other commands say, and the console commands ------------------------------------------------------------

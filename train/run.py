@@ -41,7 +41,7 @@ from pathlib import Path  # noqa: E402
 from train.common.exits import (UsageError, console, ending_signals, exit_now, fresh_line, how, os_error,  # noqa: E402
                                 raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
-from train.common.models import ABLATION_HELP, ABLATIONS, MODEL_HELP, MODELS, check_capacity  # noqa: E402
+from train.common.models import ABLATION_HELP, ABLATIONS, EXPLORE, MODEL_HELP, MODELS, check_capacity  # noqa: E402
 from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
                                    adopt_run, count_orders, gather_config, load_objects_or_fail,
                                    load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
@@ -112,7 +112,7 @@ def parse_args(argv):
                          "'ablate=[\"rules\"]': the value is read as TOML, a bare word as a string, none as None")
     ap.add_argument("--model", choices=MODELS, default=None, help=model_help())
     ap.add_argument("--ablate", action="append", default=None, metavar="PART", help=ablate_help())
-    ap.add_argument("--explore", choices=("teacher", "active"), default=None,
+    ap.add_argument("--explore", choices=EXPLORE, default=None,
                     help="who chooses the next object: teacher (the order given) or active (the robot: the object "
                          "on the stand whose comparison with a remembered episode would be cleanest for what is "
                          "still unknown; cached physics only) (default: teacher, or the config's explore)")

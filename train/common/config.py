@@ -707,7 +707,8 @@ def _show(v, depth: int = 0) -> str:
     """A value as TOML would write it, on one line, cut: strings quoted with escapes (no control character reaches a
     terminal), huge integers by their length, long or deep arrays elided."""
     if isinstance(v, str):
-        return repr(v if len(v) <= 40 else v[:40] + "...")
+        from sim.input_files import MAX_SHOWN   # cut as every refused value is (CONTRACTS.md)
+        return repr(v if len(v) <= MAX_SHOWN else v[:MAX_SHOWN - 3] + "...")
     if isinstance(v, bool):
         return "true" if v else "false"
     if v is None:

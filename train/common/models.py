@@ -1,6 +1,7 @@
 """The models a run or a sweep may name, their ablations, and whether a set fits a refusing memory: tables kept
 without torch, so that the runner and the sweeps check their flags and files before torch loads (the torch-side
-originals are aesop_torch.agent.MODELS and .ABLATIONS; tests/test_sweep.py holds them equal)."""
+originals are aesop_torch.agent.MODELS and .ABLATIONS, and aesop_torch.exploration.EXPLORE; tests/test_run_cli.py
+holds them equal)."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ MODELS = ("paper", "contextual", "extended")                          # aesop_to
 ABLATIONS = {"paper": ("rules", "gating"),                            # and .ABLATIONS
              "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed"),
              "extended": ("rules", "gating", "prior")}
+EXPLORE = ("teacher", "active")                                       # aesop_torch.exploration.EXPLORE
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
 # and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
 MODEL_HELP = {

@@ -42,8 +42,11 @@ def seed_arg(text: str) -> int:
     return int(text)
 
 
-def shown(text: str, cut: int = 40) -> str:
-    return repr(text if len(text) <= cut else text[:cut] + "...")
+def shown(text: str, cut: int | None = None) -> str:
+    """A command-line word as an error line quotes it: escaped, cut as every refused value is (CONTRACTS.md)."""
+    from sim.input_files import MAX_SHOWN
+    cut = cut or MAX_SHOWN
+    return repr(text if len(text) <= cut else text[:cut - 3] + "...")
 
 
 def gather_config(a) -> None:
