@@ -249,6 +249,11 @@ def test_overrides_reach_the_agent_and_the_rows(tmp_path):
     ('"world.mass_noise_g" = 2.0', "overrides: world.mass_noise_g is a key of the world's config"),
     ("seed = 3", "overrides: 'seed' is set by a set's seeds"),
     ('model = "extended"', "overrides: 'model' is set by the condition's model"),
+    # each in range, together the knowledge inverted or recall cut off: the runner's agent checks, the same lines
+    ('"rules.eliminated_strength" = 0.9, "rules.dominant_strength" = 0.5',
+     "overrides: rules.eliminated_strength: rules.eliminated_strength 0.9 is not <= retro_floor"),
+    ('"rules.same_rel" = 0.5, "rules.contradiction_rel" = 0.1', "overrides: rules.same_rel: rules.same_rel 0.5 is above"),
+    ('"memory.cue_rows" = [0]', "overrides: memory.cue_rows: the agent cues recall with its object hub"),
 ])
 def test_a_bad_override_is_refused_in_one_line(tmp_path, capsys, override, words):
     pytest.importorskip("train.common.config")

@@ -30,7 +30,7 @@ from __future__ import annotations
 import functools
 import math
 
-from train.common.config import ConfigError
+from train.common.agent_checks import Joint, check_knowledge, check_sheet
 
 # the longest wait of the simulator: 1000 s of simulated time at pybullet's default 1/240 s step, 100x the default
 # settle timeout and 250x the default move timeout; a step of the default scene with an object out took 0.6 ms
@@ -62,20 +62,10 @@ def check_run(config, objects, given=()) -> None:
                       _check_timeout, _check_reach, _check_layout):
             check(world, objects)
         _check_encoder(config.agent, objects)
-        _check_knowledge(config.agent)
-        _check_sheet(config.agent, given)
-    except _Joint as e:
-        key = next((k for k in e.keys if any(g == k or k.startswith(g + ".") or g.startswith(k + ".")
-                                             for g in given)), e.keys[0])
-        raise ConfigError(f"{key}: {e.message}", key) from None
-
-
-class _Joint(Exception):
-    """A refusal naming several settings (`keys`, the first the one named first) and why (`message`)."""
-
-    def __init__(self, keys, message: str):
-        super().__init__(message)
-        self.keys, self.message = list(keys), message
+        check_knowledge(config.agent)
+        check_sheet(config.agent, given)
+    except Joint as e:
+        raise e.refusal(given) from None
 
 
 def _plain(v):
@@ -96,12 +86,12 @@ def _check_layout(world, objects) -> None:
     for key, (x, y), r in (("world.jar_xy", world.jar_xy, jar_r), ("world.stand_xy", world.stand_xy,
                                                                      world.stand_radius)):
         if not (x0 - 1e-9 <= x - r and x + r <= x1 + 1e-9 and y0 - 1e-9 <= y - r and y + r <= y1 + 1e-9):
-            raise _Joint([key, "world.table_x", "world.table_y"],
+            raise Joint([key, "world.table_x", "world.table_y"],
                          f"{key} {_plain((x, y))} puts a footprint of radius {r * 100:.1f} cm off the table "
                          f"(world.table_x {_plain(world.table_x)}, world.table_y {_plain(world.table_y)})")
     gap = math.dist(world.jar_xy, world.stand_xy) - jar_r - world.stand_radius
     if gap < 0:
-        raise _Joint(["world.jar_xy", "world.stand_xy", "world.stand_radius"],
+        raise Joint(["world.jar_xy", "world.stand_xy", "world.stand_radius"],
                      f"world.jar_xy {_plain(world.jar_xy)} and world.stand_xy {_plain(world.stand_xy)} overlap (the "
                      f"jar's outer radius {jar_r * 100:.1f} cm and world.stand_radius {world.stand_radius:g} m)")
 
@@ -112,12 +102,12 @@ def _check_waits(world, objects) -> None:
                          ("world.tank.settle_timeout_s", tank.settle_timeout_s)):
         steps = seconds / tank.timestep_s
         if steps > WAIT_STEPS:
-            raise _Joint([key, "world.tank.timestep_s"],
+            raise Joint([key, "world.tank.timestep_s"],
                          f"{key} {seconds:g} s at world.tank.timestep_s {tank.timestep_s:g} s is {steps:,.0f} steps, "
                          f"more than the {WAIT_STEPS:,} a wait of the simulator may take (minutes of stepping)")
     per_wait = tank.settle_window_steps * tank.settle_windows
     if per_wait > tank.settle_timeout_s / tank.timestep_s:
-        raise _Joint(["world.tank.settle_windows", "world.tank.settle_window_steps", "world.tank.settle_timeout_s",
+        raise Joint(["world.tank.settle_windows", "world.tank.settle_window_steps", "world.tank.settle_timeout_s",
                       "world.tank.timestep_s"],
                      f"world.tank.settle_windows {tank.settle_windows} of world.tank.settle_window_steps "
                      f"{tank.settle_window_steps} steps of world.tank.timestep_s {tank.timestep_s:g} s take longer "
@@ -128,7 +118,7 @@ def _check_buoyancy(world, objects) -> None:
     tank = world.tank
     wdt = BOB_WDT_AT_DEFAULT * (tank.timestep_s / DEFAULT_STEP_S) * math.sqrt(tank.water.density / DEFAULT_DENSITY)
     if wdt > BOB_WDT_MAX:
-        raise _Joint(["world.tank.timestep_s", "world.tank.water.density"],
+        raise Joint(["world.tank.timestep_s", "world.tank.water.density"],
                      f"world.tank.timestep_s {tank.timestep_s:g} s with world.tank.water.density "
                      f"{tank.water.density:g} kg/m^3: the lightest object the objects file admits would bob at "
                      f"w dt = {wdt:.2f}, and the water follows it only below {BOB_WDT_MAX} (a smaller step or a "
@@ -138,7 +128,7 @@ def _check_buoyancy(world, objects) -> None:
 def _check_gravity(world, objects) -> None:
     tank = world.tank
     if tank.water.gravity != tank.gravity:
-        raise _Joint(["world.tank.water.gravity", "world.tank.gravity"],
+        raise Joint(["world.tank.water.gravity", "world.tank.gravity"],
                      f"{tank.water.gravity:g} m/s^2 is not world.tank.gravity "
                      f"{tank.gravity:g} m/s^2: the water's buoyancy would hold up another weight than the one that "
                      "pulls the object down (set both)")
@@ -153,7 +143,7 @@ def _check_water(world, objects) -> None:
     density = tank.water.density / 1000.0   # g/cm^3
     ball_cm3 = math.pi / 6 * tank.ball_diameter_cm ** 3
     if tank.ball_mass_g / density >= ball_cm3:
-        raise _Joint(["world.tank.water.density", "world.tank.ball_mass_g", "world.tank.ball_diameter_cm"],
+        raise Joint(["world.tank.water.density", "world.tank.ball_mass_g", "world.tank.ball_diameter_cm"],
                      f"{tank.water.density:g} kg/m^3 cannot float the green ball "
                      f"(world.tank.ball_mass_g {tank.ball_mass_g:g} g in {ball_cm3:.1f} cm^3): the goal would lie on "
                      "the bottom")
@@ -161,7 +151,7 @@ def _check_water(world, objects) -> None:
         v = archimedes_cm3(o, jar, density)
         level = jar.water_depth_cm + v / jar.area_cm2
         if level > jar.height_cm:
-            raise _Joint(["world.tank.water.density"],
+            raise Joint(["world.tank.water.density"],
                          f"in water of {tank.water.density:g} kg/m^3 object '{o.name}' "
                          f"displaces {v:.0f} cm^3, which would raise the water from {jar.water_depth_cm:g} to "
                          f"{level:.1f} cm, over the jar's {jar.height_cm:g} cm rim")
@@ -170,7 +160,7 @@ def _check_water(world, objects) -> None:
 def _check_camera(world, objects) -> None:
     cam = world.camera
     if cam.near >= cam.far:
-        raise _Joint(["world.camera.near", "world.camera.far"],
+        raise Joint(["world.camera.near", "world.camera.far"],
                      f"world.camera.near {cam.near:g} m is not nearer than world.camera.far {cam.far:g} m")
     specs = _objects(objects)
     reach = max(o.footprint_cm for o in specs) / 2 / 100.0   # the object's far side from the stand's axis, m
@@ -178,7 +168,7 @@ def _check_camera(world, objects) -> None:
     nearest, farthest = min(cam.side_distance - reach, cam.top_distance), max(cam.side_distance + reach,
                                                                                cam.top_distance + tall)
     if nearest <= cam.near or farthest >= cam.far:
-        raise _Joint(["world.camera.near", "world.camera.far", "world.camera.side_distance",
+        raise Joint(["world.camera.near", "world.camera.far", "world.camera.side_distance",
                       "world.camera.top_distance"],
                      f"the cameras see the objects from {nearest:.3f} to {farthest:.3f} m (world.camera."
                      f"side_distance {cam.side_distance:g}, world.camera.top_distance {cam.top_distance:g}), outside "
@@ -195,26 +185,26 @@ def _check_noise(world, objects) -> None:
     rise = min(smallest.mass_g / density, smallest.volume_cm3) / jar.area_cm2
     reading = world.level_noise_cm * math.sqrt(2.0)
     if NOISE_SIGMAS * reading > rise:
-        raise _Joint(["world.level_noise_cm"],
+        raise Joint(["world.level_noise_cm"],
                      f"{world.level_noise_cm:g} cm of noise on each level reading swamps the {rise:.3f} cm rise of "
                      f"object '{smallest.name}' (the smallest): at most {rise / NOISE_SIGMAS / math.sqrt(2.0):.4f} "
                      "cm, or a rise could read negative")
     # a level read in steps of r misreads a rise (two readings, each rounded) by up to r: as with the noise, the
     # smallest rise must be NOISE_SIGMAS of those deep (at 50 cm every reading was 0: every property irrelevant)
     if NOISE_SIGMAS * world.level_resolution_cm > rise:
-        raise _Joint(["world.level_resolution_cm"],
+        raise Joint(["world.level_resolution_cm"],
                      f"a level read in steps of {world.level_resolution_cm:g} cm reads the {rise:.3f} cm rise of "
                      f"object '{smallest.name}' (the smallest) to within a step of itself: at most "
                      f"{rise / NOISE_SIGMAS:.4f} cm")
     lightest = min(specs, key=lambda o: o.mass_g)
     if world.min_felt_mass_g > lightest.mass_g:
-        raise _Joint(["world.min_felt_mass_g"],
+        raise Joint(["world.min_felt_mass_g"],
                      f"{world.min_felt_mass_g:g} g is above the mass of object "
                      f"'{lightest.name}' (the lightest, {lightest.mass_g:g} g): the hand would feel the floor, not "
                      f"the object; at most {lightest.mass_g:g} g")
     heaviest = max(specs, key=lambda o: o.mass_g)
     if NOISE_SIGMAS * world.mass_noise_g > heaviest.mass_g:
-        raise _Joint(["world.mass_noise_g"],
+        raise Joint(["world.mass_noise_g"],
                      f"{world.mass_noise_g:g} g of noise swamps the felt mass of every object, even of "
                      f"'{heaviest.name}' (the heaviest, {heaviest.mass_g:g} g): at most "
                      f"{heaviest.mass_g / NOISE_SIGMAS:g} g")
@@ -288,7 +278,7 @@ REACH_KEYS = ("robot_base", "table_top_z", "jar_xy", "stand_xy", "stand_height",
 def _check_timeout(world, objects) -> None:
     tank = world.tank
     if round(world.move_timeout_s / tank.timestep_s) < 1:
-        raise _Joint(["world.move_timeout_s", "world.tank.timestep_s"],
+        raise Joint(["world.move_timeout_s", "world.tank.timestep_s"],
                      f"world.move_timeout_s {world.move_timeout_s:g} s is less than one step of world.tank."
                      f"timestep_s {tank.timestep_s:g} s: the arm would never move")
     _, carry = _targets(world, objects)
@@ -296,7 +286,7 @@ def _check_timeout(world, objects) -> None:
     need = carry / fastest
     have = world.waypoints * world.move_timeout_s
     if have < need:
-        raise _Joint(["world.move_timeout_s", "world.waypoints", "world.robot.max_velocity"],
+        raise Joint(["world.move_timeout_s", "world.waypoints", "world.robot.max_velocity"],
                      f"world.waypoints {world.waypoints} moves of world.move_timeout_s {world.move_timeout_s:g} s "
                      f"cannot carry an object the {carry * 100:.1f} cm from the stand to the jar at world.robot."
                      f"max_velocity {world.robot.max_velocity:g} rad/s (at least {need:.3g} s): it would never be "
@@ -329,7 +319,7 @@ def _check_reach(world, objects) -> None:
             keys.append("world.ik")
             settings += " and the world.ik settings given"
         x, y, z = points[i]
-        raise _Joint(keys, f"the arm cannot reach the palm's place {names[i]} ({x:.3f}, {y:.3f}, {z:.3f} m) with "
+        raise Joint(keys, f"the arm cannot reach the palm's place {names[i]} ({x:.3f}, {y:.3f}, {z:.3f} m) with "
                            f"{settings} (sim.kinematics' reach)")
 
 
@@ -340,64 +330,12 @@ def _check_encoder(agent, objects) -> None:
             ("mass", "encoder.mass_min_g", "encoder.mass_max_g", lambda o: o.mass_g)):
         lo, hi = getattr(enc, lo_key.split(".")[1]), getattr(enc, hi_key.split(".")[1])
         if lo >= hi:
-            raise _Joint([lo_key, hi_key], f"{lo_key} {lo:g} is not below {hi_key} {hi:g}")
+            raise Joint([lo_key, hi_key], f"{lo_key} {lo:g} is not below {hi_key} {hi:g}")
         for o in _objects(objects):
             u = (math.log(value(o)) - math.log(lo)) / (math.log(hi) - math.log(lo))
             if not -ENCODER_MARGIN <= u <= 1 + ENCODER_MARGIN:
                 unit = "cm" if what == "size" else "g"
-                raise _Joint([lo_key, hi_key] if u < 0 else [hi_key, lo_key],
+                raise Joint([lo_key, hi_key] if u < 0 else [hi_key, lo_key],
                              f"the encoder's {what}s {lo_key} {lo:g} .. {hi_key} {hi:g} {unit} exclude object "
                              f"'{o.name}' ({what} {value(o):.3g} {unit}): its map could not tell it from nothing")
 
-
-def _check_knowledge(agent) -> None:
-    """The rules' strengths in the order their names give them (the paper: Elimination "drastically" reduces a
-    pathway, so that it no longer retro-activates, Uncertainty "marginally", Growth strengthens), and the outcome's
-    "as expected" tolerance inside its "contradicted" one; in any other order the knowledge read off the strengths
-    says the reverse of what was learned (eliminated_strength 5 with dominant_strength 0.01: every eliminated
-    property recalled above the causal one). A run whose context the jar does not show: refused too."""
-    r = agent.rules
-    chain = [("rules.eliminated_strength", r.eliminated_strength), "<=", ("retro_floor", agent.retro_floor), "<",
-             ("rules.uncertain_floor", r.uncertain_floor), "<=", (None, 1.0), "<",
-             ("rules.dominant_strength", r.dominant_strength)]
-    said = " ".join(x if isinstance(x, str) else x[0] or "1" for x in chain)
-    for i in range(0, len(chain) - 2, 2):
-        (ka, a), op, (kb, b) = chain[i:i + 3]
-        if not (a <= b if op == "<=" else a < b):
-            name = lambda k, v: f"{k} {v:g}" if k else "1"   # noqa: E731
-            raise _Joint([k for k in (ka, kb) if k],
-                         f"{name(ka, a)} is not {op} {name(kb, b)}: a pathway's strengths keep the order {said} (an "
-                         "eliminated pathway no longer retro-activates, an undecided one does, a dominant one leads)")
-    for same, contra in (("same_abs_cm3", "contradiction_abs_cm3"), ("same_rel", "contradiction_rel")):
-        if getattr(r, same) > getattr(r, contra):
-            raise _Joint([f"rules.{same}", f"rules.{contra}"],
-                         f"rules.{same} {getattr(r, same):g} is above rules.{contra} {getattr(r, contra):g}: an "
-                         "outcome is contradicted only beyond what is as expected")
-    if agent.encoder.context:
-        raise _Joint(["encoder.context"],
-                     f"{list(agent.encoder.context)}: a jar run perceives no context (only a task "
-                     "file's apparatus shows one), so its map would never see anything; leave it empty")
-
-
-def _check_sheet(agent, given) -> None:
-    """The sheet's rows as the agent writes and cues them (aesop_torch.agent_config: OBJECT_ROWS, AGENT_ROW_K), which
-    train.common.config checks only for its size: other cue rows take a cue of another size, and a row's k-WTA of
-    another k than the neurons the agent writes there refuses the first episode stored, both mid-run."""
-    from aesop_torch.agent_config import AGENT_ROW_K, OBJECT_ROWS
-
-    hub, memory = agent.hub, agent.memory
-    if tuple(memory.cue_rows) != OBJECT_ROWS:
-        raise _Joint(["memory.cue_rows"], f"the agent cues recall with its object hub, the sheet's rows "
-                                          f"{list(OBJECT_ROWS)}, got {list(memory.cue_rows)}")
-    # an object row holds the hub's assembly_size neurons, the reward's rows one unit each, an event's row its code's
-    # two neurons
-    want = tuple(hub.assembly_size if r in OBJECT_ROWS else k for r, k in enumerate(AGENT_ROW_K))
-    if tuple(memory.row_k[:len(want)]) != want:
-        r = next(r for r, (a, b) in enumerate(zip(memory.row_k, want)) if a != b)
-        keys = ["hub.assembly_size", "memory.row_k"] if r in OBJECT_ROWS and "memory.row_k" not in given else \
-            ["memory.row_k", "hub.assembly_size"]
-        raise _Joint(keys, f"row {r} of the agent's episodes holds {want[r]} active neuron(s) "
-                           f"({'hub.assembly_size, on an object row' if r in OBJECT_ROWS else 'its code'}), but "
-                           f"memory.row_k gives it {memory.row_k[r]}: memory.row_k must begin {list(want)}")
-    if hub.word_map != "word":
-        raise _Joint(["hub.word_map"], f"the agent hears names on its map 'word', got {hub.word_map!r}")

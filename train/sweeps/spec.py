@@ -186,7 +186,8 @@ def _condition(c, where: str, names: set) -> dict:
         except ImportError:
             raise SweepError(f"{where}: overrides need train/common/config.py, which this checkout lacks") from None
         try:
-            agent_config(cond, 0, 8)
+            from train.common.agent_checks import check_agent
+            check_agent(agent_config(cond, 0, 8), given=tuple(cond["overrides"]))
         except (ConfigError, ValueError, TypeError) as e:
             why = (str(e).strip().splitlines() or [type(e).__name__])[0]
             raise SweepError(f"{where}: overrides: {why}") from None
