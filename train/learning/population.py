@@ -172,6 +172,15 @@ class SharedRecallMemory(EpisodicMemory):
         return cache.recall(keys, cue.device)
 
 
+def _sorted_rows(rows: torch.Tensor) -> bool:
+    """Whether the (N, n) rows are in lexicographic order (equal rows side by side allowed)."""
+    if rows.shape[0] < 2 or rows.shape[1] == 0:
+        return True
+    step = rows[1:] - rows[:-1]
+    first = (step != 0).to(torch.uint8).argmax(1)        # the first column where a row differs from the one before
+    return bool((step.gather(1, first[:, None]) >= 0).all())   # rising there (0: the same row)
+
+
 class _Trie:
     """The orders sorted lexicographically; node[t][i] is the level-t node (prefix of length t + 1) of sorted row i,
     and level-t node k spans the sorted rows lo[t][k]..hi[t][k]."""
@@ -179,8 +188,9 @@ class _Trie:
     def __init__(self, orders: torch.Tensor):
         N, n = orders.shape
         perm = torch.arange(N)
-        for c in reversed(range(n)):   # least significant column first, stable sorts: lexicographic order
-            perm = perm[torch.sort(orders[perm, c], stable=True).indices]
+        if not _sorted_rows(orders):   # (all orders come sorted: the stable sorts would leave them as they are)
+            for c in reversed(range(n)):   # least significant column first, stable sorts: lexicographic order
+                perm = perm[torch.sort(orders[perm, c], stable=True).indices]
         self.perm, self.rows = perm, orders[perm]
         differs = torch.zeros(N, dtype=torch.bool)
         self.start, self.node, self.lo, self.hi = [], [], [], []
@@ -203,7 +213,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
-    gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
+    gives), or the same as an (N, n) long tensor (order_tensor). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
     config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
     DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
@@ -224,9 +234,15 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         raise ValueError(f"need at least one train object and one order, got {n} objects and {N} orders")
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk}")
-    if any(len(o) != n for o in orders):
-        raise ValueError(f"every order must list {n} train objects (one per episode)")
-    order_t = torch.tensor(orders, dtype=torch.long)
+    if isinstance(orders, torch.Tensor):   # as train.learning.experiment.order_tensor gives (no lists for 9! rows)
+        if orders.dim() != 2 or orders.shape[1] != n or orders.dtype != torch.long:
+            raise ValueError(f"every order must list {n} train objects (one per episode): an (N, {n}) long tensor, "
+                             f"not {orders.dtype} {tuple(orders.shape)}")
+        order_t = orders
+    else:
+        if any(len(o) != n for o in orders):
+            raise ValueError(f"every order must list {n} train objects (one per episode)")
+        order_t = torch.tensor(orders, dtype=torch.long)
     if int(order_t.min()) < 0 or int(order_t.max()) >= n:
         raise ValueError(f"orders must index the {n} train objects (0..{n - 1})")
     missing = [m for m in train_names if m not in outcomes] + [m for m in probe_names if m not in probes]
@@ -284,10 +300,10 @@ def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed
     "final_probe_cm3": what the runner asks of its figure process (train/runner/loop.py), which runs it beside the
     detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
     from aesop_torch.malloc import keep_freed_memory
-    from train.learning.experiment import draw_orders
+    from train.learning.experiment import order_tensor
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
-    out = run_population(train_names, probe_names, draw_orders(len(train_names), orders, seed), outcomes, probes,
+    out = run_population(train_names, probe_names, order_tensor(len(train_names), orders, seed), outcomes, probes,
                          config, curves=True)
     del out["final_probe_cm3"]
     return out
