@@ -142,3 +142,36 @@ def test_figure_2_encoded_once_writes_what_add_image_writes(tmp_path):
         acc.Reload()
         got.append([(e.step, e.width, e.height, e.encoded_image_string) for e in acc.Images("figure2")])
     assert got[0] == got[1] and len(got[0]) == 1 and got[0][0][:3] == (8, 5, 6)
+
+
+def test_probe_readings_on_a_process_of_their_own_are_the_walks_own(world):
+    """The population's curves read on a forked process (run_orders' way with 2 cores) give what the walk reads
+    itself: every result the same, the predictions bit for bit; the child is gone after."""
+    import os
+
+    objs, outcomes, probes = world
+    names, probe_names = [o.name for o in objs.train][:5], [p.name for p in objs.probe]
+    orders = order_tensor(5, "all", 0)
+    here = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True)
+    there = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True,
+                           probe_process=True)
+    assert torch.equal(here.pop("final_probe_cm3").view(torch.int32), there.pop("final_probe_cm3").view(torch.int32))
+    for k in here.keys() - {"timing_s"}:
+        assert here[k] == there[k], k
+    assert any(c["values"] for c in here["curves"]["probe_rel_error"])
+    with pytest.raises(ChildProcessError):   # reaped: no child left behind
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_a_probe_process_that_dies_is_an_error_not_a_gap(world, monkeypatch):
+    import train.learning.population as population
+
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+
+    def dies(*args):
+        raise MemoryError("killed")
+    monkeypatch.setattr(population, "_serve", dies)   # the forked child calls it
+    with pytest.raises(RuntimeError, match="probe process .* died"):
+        run_population(names, probe_names, order_tensor(3, "all", 0), outcomes, probes, AgentConfig(), curves=True,
+                       probe_process=True)
