@@ -688,7 +688,7 @@ class _ProbeProcess:
         from multiprocessing.connection import Connection
         to_r, to_w = os.pipe()
         back_r, back_w = os.pipe()
-        parent = os.getpid()
+        parent, threads = os.getpid(), torch.get_num_threads()
         pid = os.fork()
         if pid == 0:   # the child
             code = 1
@@ -698,6 +698,7 @@ class _ProbeProcess:
                 from train.learning.sim_pool import _die_with
                 signal.signal(signal.SIGINT, signal.SIG_IGN)
                 _die_with(parent)
+                torch.set_num_threads(threads)   # the walk's (run_population's `threads`)
                 _serve(walk, template, Connection(to_r, writable=False), Connection(back_w, readable=False))
                 code = 0
             finally:
