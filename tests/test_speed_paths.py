@@ -164,7 +164,7 @@ def test_probe_readings_on_a_process_of_their_own_are_the_walks_own(world):
 
 
 def test_a_probe_process_that_dies_is_an_error_not_a_gap(world, monkeypatch):
-    import train.learning.population as population
+    from train.learning import population
 
     objs, outcomes, probes = world
     names, probe_names = list(THREE), [p.name for p in objs.probe]

@@ -219,8 +219,8 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
-    gives), or the same as an (N, n) long tensor (order_tensor). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
-    config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
+    gives), or the same as an (N, n) long tensor (order_tensor). outcomes / probes: `Experiment.outcomes` /
+    `Experiment.probes` (every train and probe name present). config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
     does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
     DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
     and its peer in benches/population.py). curves=True: also the probe error after every episode of every order
@@ -318,9 +318,9 @@ def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed
     from aesop_torch.malloc import keep_freed_memory
     from train.learning.experiment import order_tensor
 
-    keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
     from train.learning.sim_pool import cores
 
+    keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
     out = run_population(train_names, probe_names, order_tensor(len(train_names), orders, seed), outcomes, probes,
                          config, curves=True, probe_process=cores() > 1)
     del out["final_probe_cm3"]
@@ -684,7 +684,7 @@ class _ProbeProcess:
     The child ignores Ctrl-C, ends at SIGTERM or SIGHUP and dies with this process (sim_pool._die_with); it never
     returns into the caller's code (os._exit). A child that died is an error here, not a silent gap."""
 
-    def __init__(self, walk: "_Walk", template: Agent):
+    def __init__(self, walk: _Walk, template: Agent):
         from multiprocessing.connection import Connection
         to_r, to_w = os.pipe()
         back_r, back_w = os.pipe()
@@ -755,7 +755,7 @@ class _ProbeProcess:
             conn.close()
 
 
-def _serve(walk: "_Walk", template: Agent, inbox, outbox) -> None:
+def _serve(walk: _Walk, template: Agent, inbox, outbox) -> None:
     """_ProbeProcess's child: read the batches of agents' states until None, then answer their errors."""
     cache, memo = RecallCache(), {}
     while (msg := pickle.loads(inbox.recv_bytes())) is not None:
