@@ -222,8 +222,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     gives), or the same as an (N, n) long tensor (order_tensor). outcomes / probes: `Experiment.outcomes` /
     `Experiment.probes` (every train and probe name present). config: the agents' config (not modified; the
     experiment's buffer caps are applied to a copy, as Experiment does). progress: optional callable(orders_done,
-    orders_total). threads: torch threads while running (default DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
-    and its peer in benches/population.py). curves=True: also the probe error after every episode of every order
+    orders_total). threads: torch threads while running (default DEFAULT_THREADS), restored afterwards.
+    merge=False: the plain trie, every node stepped (a check on the merging, and its peer in
+    benches/population.py). curves=True: also the probe error after every episode of every order
     (one probe reading per stepped state: Figure 2's bands over all orders; off, the run is as fast as before).
     probe_process=True (with curves, Linux): those probe readings are made on a process of its own, forked here
     (`_ProbeProcess`), beside the walk: they were half of the population's time on one core.
