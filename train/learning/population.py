@@ -548,8 +548,12 @@ class _Walk:
         if self.helper is None:
             return
         tic = time.perf_counter()
-        for (t, d), e in self.helper.results().items():
+        memo, leaves = self.helper.results()
+        for (t, d), e in memo.items():
             self.err_memo[t][d] = e
+        # the leaves' predictions and errors, in the order _finish sent them (every leaf batch was sent)
+        self.leaf_pred = [torch.from_numpy(pred) for pred, _ in leaves]
+        self.leaf_errors = [e for _, errors in leaves for e in errors]
         for t, ids, digests in self.pending_errors:
             self._write_errors(t, ids, digests)
         for t, lo, hi, src in self.pending_copies:
@@ -653,10 +657,16 @@ class _Walk:
             result.append(r)
         if new:
             sub = leaves if len(new) == leaves.batch else leaves.select(torch.tensor(new))
-            pred = self._probe_predictions(sub)
-            self.leaf_pred.append(pred)
+            if self.helper is not None:   # predicted there; collect_errors puts them in these places
+                self.helper.send(-1, None, sub, cached=sub is leaves)
+                self.leaf_pred.append(None)
+                self.leaf_errors += [None] * len(new)
+            else:
+                pred = self._probe_predictions(sub)
+                self.leaf_pred.append(pred)
+                self.leaf_errors += [None if e is None else round(e, 4)
+                                     for e in median_rel_errors(pred, self.truth)]
             self.leaf_keys += knowledge_keys(sub.rules.state)
-            self.leaf_errors += [None if e is None else round(e, 4) for e in median_rel_errors(pred, self.truth)]
         tr = self.trie
         lo, hi = tr.lo[-1][ids], tr.hi[-1][ids]
         self.leaf_of[lo] = torch.tensor(result)
@@ -674,13 +684,14 @@ class _Walk:
 
 
 class _ProbeProcess:
-    """The probe readings of a population's curves (`_Walk._record_errors`) on a child process forked from this
-    one (it has the walk's probes and the agents' maps already), fed each batch of new states through a pipe as
-    plain arrays: the walk steps its agents meanwhile. The child reads each batch as _record_errors reads it (the
-    same agents, the same batch, `_probe_predictions`, a RecallCache where the walk's would be used: its own, so
-    the walk's steps no longer find the probes' recalls there and make them again; a recall is the same whatever
-    batch makes it) and answers, at the end, the rounded error of every (level, digest). All 9! orders of nine
-    objects: 10.3 s of CPU on the walk's process and 6.5 s on the child, against 15.9 s on one (a busy machine).
+    """The probe readings of a population's curves (`_Walk._record_errors`) and of its leaves (`_Walk._finish`) on a
+    child process forked from this one (it has the walk's probes and the agents' maps already), fed each batch of
+    new states through a pipe as plain arrays: the walk steps its agents meanwhile. The child reads each batch as
+    the walk reads it (the same agents, the same batch, `_probe_predictions`, a RecallCache where the walk's would
+    be used: its own, so the walk's steps no longer find the probes' recalls there and make them again; a recall
+    is the same whatever batch makes it) and answers, at the end, the rounded error of every (level, digest) and
+    the leaves' predictions. All 9! orders of nine objects, the curves' readings alone moved: 10.3 s of CPU on the
+    walk's process and 6.5 s on the child, against 15.9 s on one (a busy machine).
 
     The child ignores Ctrl-C, ends at SIGTERM or SIGHUP and dies with this process (sim_pool._die_with); it never
     returns into the caller's code (os._exit). A child that died is an error here, not a silent gap."""
@@ -722,22 +733,24 @@ class _ProbeProcess:
                 return
 
     def send(self, t: int, digests: list, agents: Agent, cached: bool) -> None:
-        """The agents whose states have these digests at level t; cached: their memory recalls through the run's
+        """The agents whose states have these digests at level t (-1: leaves, digests None); cached: their memory recalls through the run's
         RecallCache (as a stepped batch's does, not one selected from it: Agent.select leaves the cache out)."""
         state = {name: {key: getattr(part, key).numpy() for key in part.state_dict()}
                  for name, part in (("hub", agents.hub), ("memory", agents.memory), ("rules", agents.rules))}
         self._queue.put(pickle.dumps((t, digests, cached, state), protocol=pickle.HIGHEST_PROTOCOL))
 
-    def results(self) -> dict:
-        """{(level, digest): rounded error (NaN: nothing predicted)} of every state sent."""
+    def results(self) -> tuple[dict, list]:
+        """({(level, digest): rounded error (NaN: nothing predicted)} of every state sent at a level, [(predictions
+        (B, n_probes), their rounded errors (None: nothing predicted))] of every batch of leaves sent (level -1), in
+        the order sent)."""
         self._queue.put(pickle.dumps(None))
         self._queue.put(None)
         self._writer.join()
         try:
             if self._failed is not None:
                 raise EOFError
-            memo, self.recalls = pickle.loads(self._back.recv_bytes())
-            return memo
+            memo, leaves, self.recalls = pickle.loads(self._back.recv_bytes())
+            return memo, leaves
         except EOFError:
             raise RuntimeError(f"the population's probe process (pid {self.pid}) died") from None
 
@@ -758,19 +771,24 @@ class _ProbeProcess:
 
 def _serve(walk: _Walk, template: Agent, inbox, outbox) -> None:
     """_ProbeProcess's child: read the batches of agents' states until None, then answer their errors."""
-    cache, memo = RecallCache(), {}
+    cache, memo, leaves = RecallCache(), {}, []
     while (msg := pickle.loads(inbox.recv_bytes())) is not None:
         t, digests, cached, state = msg
-        agents = template.select(torch.zeros(len(digests), dtype=torch.long))
+        agents = template.select(torch.zeros(len(state["memory"]["count"]), dtype=torch.long))
         for name, buffers in state.items():
             part = getattr(agents, name)
             for key, value in buffers.items():
                 setattr(part, key, torch.from_numpy(value))
         if cached:
             agents.memory.cache = cache
-        for d, e in zip(digests, median_rel_errors(walk._probe_predictions(agents), walk.truth)):
+        pred = walk._probe_predictions(agents)
+        errors = median_rel_errors(pred, walk.truth)
+        if t < 0:   # leaves, as _Walk._finish reads them
+            leaves.append((pred.numpy(), [None if e is None else round(e, 4) for e in errors]))
+            continue
+        for d, e in zip(digests, errors):
             memo[(t, d)] = float("nan") if e is None else round(e, 4)
-    outbox.send_bytes(pickle.dumps((memo, _digests(cache.index)), protocol=pickle.HIGHEST_PROTOCOL))
+    outbox.send_bytes(pickle.dumps((memo, leaves, _digests(cache.index)), protocol=pickle.HIGHEST_PROTOCOL))
 
 
 def _digests(keys) -> set:
