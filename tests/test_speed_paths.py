@@ -175,3 +175,27 @@ def test_a_probe_process_that_dies_is_an_error_not_a_gap(world, monkeypatch):
     with pytest.raises(RuntimeError, match="probe process .* died"):
         run_population(names, probe_names, order_tensor(3, "all", 0), outcomes, probes, AgentConfig(), curves=True,
                        probe_process=True)
+
+
+def test_a_population_given_the_developed_maps_is_the_one_that_develops_them(world):
+    """The runner hands its experiment's maps to the population (run_orders' maps) rather than have them developed
+    again: the same results, the predictions bit for bit; maps of another seed give other activities (the maps
+    are used, not ignored)."""
+    from aesop_torch.agent import Agent
+
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+    orders = order_tensor(3, "all", 0)
+    own = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True)
+    maps = {k: v.numpy() for k, v in Agent(AgentConfig()).maps.state_dict().items()}
+    given = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True, maps=maps)
+    pred = own.pop("final_probe_cm3")
+    assert torch.equal(pred.view(torch.int32), given.pop("final_probe_cm3").view(torch.int32))
+    for k in own.keys() - {"timing_s"}:
+        assert own[k] == given[k], k
+    other = AgentConfig()
+    other.seed = 1
+    maps1 = {k: v.numpy() for k, v in Agent(other).maps.state_dict().items()}
+    assert any((maps1[k] != maps[k]).any() for k in maps)
+    moved = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True, maps=maps1)
+    assert not torch.equal(moved["final_probe_cm3"].nan_to_num(-1.0), pred.nan_to_num(-1.0))

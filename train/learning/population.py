@@ -215,7 +215,7 @@ class _Trie:
 def run_population(train_names: list[str], probe_names: list[str], orders: list[list[int]], outcomes: dict,
                    probes: dict, config: AgentConfig, chunk: int = DEFAULT_CHUNK, progress=None,
                    threads: int | None = None, merge: bool = True, curves: bool = False,
-                   probe_process: bool = False) -> dict:
+                   probe_process: bool = False, maps: dict | None = None) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
@@ -227,7 +227,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     benches/population.py). curves=True: also the probe error after every episode of every order
     (one probe reading per stepped state: Figure 2's bands over all orders; off, the run is as fast as before).
     probe_process=True (with curves, Linux): those probe readings are made on a process of its own, forked here
-    (`_ProbeProcess`), beside the walk: they were half of the population's time on one core.
+    (`_ProbeProcess`), beside the walk: they were half of the population's time on one core. maps: the property
+    maps' state (`Agent.maps.state_dict()`, tensors or arrays) of an agent of this config, developed already (the
+    runner's experiment's): loaded instead of developed again (0.3-0.8 s), as a resumed run loads them.
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
@@ -271,7 +273,9 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         if config.explore == "active":   # the agents choose their own objects: no prefixes to share
             return _run_active(train_names, probe_names, order_t, outcomes, probes, config, chunk, progress, curves,
                                t0)
-        root = Agent(config, batch=1)
+        root = Agent(config, batch=1, develop=maps is None)
+        if maps is not None:
+            root.maps.load_state_dict({k: torch.as_tensor(v) for k, v in maps.items()})
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
         walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge, curves)
@@ -312,7 +316,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 
 
 def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
-               config: AgentConfig) -> dict:
+               config: AgentConfig, maps: dict | None = None) -> dict:
     """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
     "final_probe_cm3": what the runner asks of its figure process (train/runner/loop.py), which runs it beside the
     detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
@@ -323,7 +327,7 @@ def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
     out = run_population(train_names, probe_names, order_tensor(len(train_names), orders, seed), outcomes, probes,
-                         config, curves=True, probe_process=cores() > 1)
+                         config, curves=True, probe_process=cores() > 1, maps=maps)
     del out["final_probe_cm3"]
     return out
 
