@@ -28,28 +28,56 @@ from pathlib import Path
 import torch
 
 
+def _unrun_package(name: str):
+    """Register package `name` as it is, its __init__ not run yet: its first attribute nothing defines yet runs
+    that __init__ (a submodule is imported as such), so `import name; name.X` works as ever, with the same module
+    objects. None if it is imported already."""
+    if name in sys.modules:
+        return None
+    spec = importlib.util.find_spec(name)
+    if spec is None:
+        raise ImportError(f"{name} is not installed (`make test` or `make run` installs it)")
+    package = importlib.util.module_from_spec(spec)
+
+    def rest(attr: str):
+        if importlib.util.find_spec(f"{spec.name}.{attr}") is not None:   # a submodule: `from . import chain`
+            return importlib.import_module(f"{spec.name}.{attr}")
+        del package.__getattr__          # once: the __init__ defines what the package offers
+        spec.loader.exec_module(package)
+        return getattr(package, attr)
+    package.__getattr__ = rest
+    sys.modules[spec.name] = package
+    return package
+
+
+def _lazy_module(name: str) -> None:
+    """Register module `name` to be executed at its first attribute access (importlib.util.LazyLoader)."""
+    if name in sys.modules:
+        return
+    spec = importlib.util.find_spec(name)
+    if spec is None:
+        raise ImportError(f"{name} is not installed (`make test` or `make run` installs it)")
+    spec.loader = importlib.util.LazyLoader(spec.loader)
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[name] = module
+    spec.loader.exec_module(module)
+    parent, _, child = name.rpartition(".")
+    if parent:   # `from parent import child` finds it there, without the import system's look at it (which loads it)
+        setattr(sys.modules[parent], child, module)
+
+
 def _chain_modules():
     """pytorch-kinematics' URDF chain builder and rotation conversions, without running its package __init__ yet.
 
     That __init__ also imports its IK and SDF modules and, with them, matplotlib: 0.36 s of the package's 0.58 s
     import, on the critical path of every run (the runner imports the simulator before it forks its workers).
-    Only the chain and the rotations are used here. The package is registered as it is (its __init__ not run),
-    and its first attribute nothing defines yet runs that __init__: `import pytorch_kinematics as pk;
-    pk.PseudoInverseIK` works as ever, with the same module objects."""
-    if "pytorch_kinematics" not in sys.modules:
-        spec = importlib.util.find_spec("pytorch_kinematics")
-        if spec is None:
-            raise ImportError("pytorch_kinematics is not installed (`make test` or `make run` installs it)")
-        package = importlib.util.module_from_spec(spec)
-
-        def rest(name: str):
-            if importlib.util.find_spec(f"{spec.name}.{name}") is not None:   # a submodule: `from . import chain`
-                return importlib.import_module(f"{spec.name}.{name}")
-            del package.__getattr__          # once: the __init__ defines what the package offers
-            spec.loader.exec_module(package)
-            return getattr(package, name)
-        package.__getattr__ = rest
-        sys.modules[spec.name] = package
+    Only the chain and the rotations are used here. Its transforms import arm_pytorch_utilities' linalg, whose
+    import of scipy.linalg (and through it numpy.f2py and charset_normalizer) took another 0.46 s, for a function
+    (batch_batch_product, Transform3d.transform_points) the simulator never calls: that module is loaded when it is
+    first used, and arm_pytorch_utilities' __init__ (which imports it) when the package is first asked for a name."""
+    _unrun_package("pytorch_kinematics")
+    if _unrun_package("arm_pytorch_utilities") is not None:
+        _lazy_module("arm_pytorch_utilities.linalg")
     from pytorch_kinematics.transforms import rotation_conversions
     from pytorch_kinematics.urdf import build_serial_chain_from_urdf
     return build_serial_chain_from_urdf, rotation_conversions

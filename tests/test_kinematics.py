@@ -258,11 +258,16 @@ def test_load_refuses_bad_posture():
 
 
 def test_the_simulator_leaves_pytorch_kinematics_whole_and_matplotlib_out():
-    """sim.kinematics loads only pytorch-kinematics' chain and rotations (its package __init__ pulls in matplotlib);
-    the package is still whole for whoever imports it after: the same module objects, its IK solver there."""
+    """sim.kinematics loads only pytorch-kinematics' chain and rotations (its package __init__ pulls in matplotlib)
+    and not scipy (arm_pytorch_utilities' linalg, loaded when first used); both packages are still whole for
+    whoever imports them after: the same module objects, pk's IK solver and the linalg functions there."""
     import subprocess
     import sys
     code = ("import sys, sim.world, sim.kinematics as k; assert 'matplotlib' not in sys.modules; "
+            "assert 'scipy' not in sys.modules, 'scipy imported'; "
+            "import torch, arm_pytorch_utilities as apu; from arm_pytorch_utilities import linalg; "
+            "x = torch.ones(2, 3, 3); assert torch.equal(linalg.batch_batch_product(torch.ones(2, 3), x), "
+            "torch.full((2, 3), 3.0)); assert apu.cov is linalg.cov and 'scipy.linalg' in sys.modules; "
             "import pytorch_kinematics as pk; from pytorch_kinematics import SerialChain; "
             "assert pk.PseudoInverseIK and pk.transforms.Transform3d and SerialChain; "
             "assert pk.build_serial_chain_from_urdf is k.build_serial_chain_from_urdf and pk.chain.SerialChain is "

@@ -11,6 +11,7 @@ from train.learning.experiment import (
     Experiment,
     closed_form_outcomes,
     draw_orders,
+    order_tensor,
     stack_measurements,
 )
 from train.learning.sim_pool import Physics
@@ -51,6 +52,59 @@ def test_the_first_orders_of_a_draw_are_the_full_draws_first(orders):
         assert draw_orders(5, orders, seed=3, limit=limit) == full[:limit]
 
 
+@pytest.mark.parametrize("n", range(1, 9))
+def test_all_orders_as_a_tensor_are_itertools_permutations(n):
+    """Oracle: itertools.permutations(range(n)), lexicographic, as draw_orders lists them."""
+    import itertools
+    got = order_tensor(n, "all", 0)
+    assert got.dtype == torch.long and got.tolist() == [list(p) for p in itertools.permutations(range(n))]
+
+
+@pytest.mark.parametrize("orders", ["listed", "1", "7", "200"])
+def test_other_orders_as_a_tensor_are_the_draw(orders):
+    assert order_tensor(5, orders, 3).tolist() == draw_orders(5, orders, seed=3)
+
+
+def test_rows_are_sorted_only_in_lexicographic_order():
+    import random
+
+    from train.learning.population import _sorted_rows
+    rng = random.Random(0)
+    for _ in range(300):
+        n = rng.randint(1, 4)
+        rows = [[rng.randrange(3) for _ in range(n)] for _ in range(rng.randint(1, 7))]
+        assert _sorted_rows(torch.tensor(rows)) == (sorted(rows) == rows), rows
+
+
+def test_orders_given_as_a_tensor_run_as_the_lists(world):
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+    lists = [[2, 0, 1], [0, 1, 2], [1, 2, 0], [0, 1, 2]]   # unsorted, one repeated
+    want = run_population(names, probe_names, lists, outcomes, probes, AgentConfig(), curves=True)
+    got = run_population(names, probe_names, torch.tensor(lists), outcomes, probes, AgentConfig(), curves=True)
+    assert torch.equal(got.pop("final_probe_cm3").view(torch.int32), want.pop("final_probe_cm3").view(torch.int32))
+    for k in got.keys() - {"timing_s"}:
+        assert got[k] == want[k], k
+    for bad in (torch.tensor([[0, 1]]), torch.tensor([0, 1, 2]), torch.tensor([[0.0, 1.0, 2.0]])):
+        with pytest.raises(ValueError, match="every order must list 3 train objects"):
+            run_population(names, probe_names, bad, outcomes, probes, AgentConfig())
+
+
+def test_json_safe_of_plain_lists_is_the_item_by_item_answer():
+    import math
+
+    from train.runner.summary import json_safe
+
+    class Sub(float):
+        pass
+    for items in (["IIDD", "UUDD"], [0.25, None, math.nan, -math.inf, 0.5], [1, True, None, "x"],
+                  [Sub("nan"), 1.0], [(math.inf, 1.0), "a"], []):
+        got = json_safe(items)
+        want = [None if isinstance(v, float) and not math.isfinite(v) else
+                [None if not math.isfinite(w) else w for w in v] if isinstance(v, tuple) else v for v in items]
+        assert got == want and got is not items and [type(v) for v in got] == [type(v) for v in want], items
+
+
 def test_run_orders_is_run_population_of_the_drawn_orders_without_the_predictions(world):
     objs, outcomes, probes = world
     names, probe_names = list(THREE), [p.name for p in objs.probe]
@@ -88,3 +142,60 @@ def test_figure_2_encoded_once_writes_what_add_image_writes(tmp_path):
         acc.Reload()
         got.append([(e.step, e.width, e.height, e.encoded_image_string) for e in acc.Images("figure2")])
     assert got[0] == got[1] and len(got[0]) == 1 and got[0][0][:3] == (8, 5, 6)
+
+
+def test_probe_readings_on_a_process_of_their_own_are_the_walks_own(world):
+    """The population's curves read on a forked process (run_orders' way with 2 cores) give what the walk reads
+    itself: every result the same, the predictions bit for bit; the child is gone after."""
+    import os
+
+    objs, outcomes, probes = world
+    names, probe_names = [o.name for o in objs.train][:5], [p.name for p in objs.probe]
+    orders = order_tensor(5, "all", 0)
+    here = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True)
+    there = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True,
+                           probe_process=True)
+    assert torch.equal(here.pop("final_probe_cm3").view(torch.int32), there.pop("final_probe_cm3").view(torch.int32))
+    for k in here.keys() - {"timing_s"}:
+        assert here[k] == there[k], k
+    assert any(c["values"] for c in here["curves"]["probe_rel_error"])
+    with pytest.raises(ChildProcessError):   # reaped: no child left behind
+        os.waitpid(-1, os.WNOHANG)
+
+
+def test_a_probe_process_that_dies_is_an_error_not_a_gap(world, monkeypatch):
+    from train.learning import population
+
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+
+    def dies(*args):
+        raise MemoryError("killed")
+    monkeypatch.setattr(population, "_serve", dies)   # the forked child calls it
+    with pytest.raises(RuntimeError, match="probe process .* died"):
+        run_population(names, probe_names, order_tensor(3, "all", 0), outcomes, probes, AgentConfig(), curves=True,
+                       probe_process=True)
+
+
+def test_a_population_given_the_developed_maps_is_the_one_that_develops_them(world):
+    """The runner hands its experiment's maps to the population (run_orders' maps) rather than have them developed
+    again: the same results, the predictions bit for bit; maps of another seed give other activities (the maps
+    are used, not ignored)."""
+    from aesop_torch.agent import Agent
+
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+    orders = order_tensor(3, "all", 0)
+    own = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True)
+    maps = {k: v.numpy() for k, v in Agent(AgentConfig()).maps.state_dict().items()}
+    given = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True, maps=maps)
+    pred = own.pop("final_probe_cm3")
+    assert torch.equal(pred.view(torch.int32), given.pop("final_probe_cm3").view(torch.int32))
+    for k in own.keys() - {"timing_s"}:
+        assert own[k] == given[k], k
+    other = AgentConfig()
+    other.seed = 1
+    maps1 = {k: v.numpy() for k, v in Agent(other).maps.state_dict().items()}
+    assert any((maps1[k] != maps[k]).any() for k in maps)
+    moved = run_population(names, probe_names, orders, outcomes, probes, AgentConfig(), curves=True, maps=maps1)
+    assert not torch.equal(moved["final_probe_cm3"].nan_to_num(-1.0), pred.nan_to_num(-1.0))

@@ -33,6 +33,11 @@ from __future__ import annotations
 
 import copy
 import hashlib
+import os
+import pickle
+import queue
+import signal
+import threading
 import time
 from collections import Counter
 
@@ -172,6 +177,15 @@ class SharedRecallMemory(EpisodicMemory):
         return cache.recall(keys, cue.device)
 
 
+def _sorted_rows(rows: torch.Tensor) -> bool:
+    """Whether the (N, n) rows are in lexicographic order (equal rows side by side allowed)."""
+    if rows.shape[0] < 2 or rows.shape[1] == 0:
+        return True
+    step = rows[1:] - rows[:-1]
+    first = (step != 0).to(torch.uint8).argmax(1)        # the first column where a row differs from the one before
+    return bool((step.gather(1, first[:, None]) >= 0).all())   # rising there (0: the same row)
+
+
 class _Trie:
     """The orders sorted lexicographically; node[t][i] is the level-t node (prefix of length t + 1) of sorted row i,
     and level-t node k spans the sorted rows lo[t][k]..hi[t][k]."""
@@ -179,8 +193,9 @@ class _Trie:
     def __init__(self, orders: torch.Tensor):
         N, n = orders.shape
         perm = torch.arange(N)
-        for c in reversed(range(n)):   # least significant column first, stable sorts: lexicographic order
-            perm = perm[torch.sort(orders[perm, c], stable=True).indices]
+        if not _sorted_rows(orders):   # (all orders come sorted: the stable sorts would leave them as they are)
+            for c in reversed(range(n)):   # least significant column first, stable sorts: lexicographic order
+                perm = perm[torch.sort(orders[perm, c], stable=True).indices]
         self.perm, self.rows = perm, orders[perm]
         differs = torch.zeros(N, dtype=torch.bool)
         self.start, self.node, self.lo, self.hi = [], [], [], []
@@ -199,21 +214,28 @@ class _Trie:
 
 def run_population(train_names: list[str], probe_names: list[str], orders: list[list[int]], outcomes: dict,
                    probes: dict, config: AgentConfig, chunk: int = DEFAULT_CHUNK, progress=None,
-                   threads: int | None = None, merge: bool = True, curves: bool = False) -> dict:
+                   threads: int | None = None, merge: bool = True, curves: bool = False,
+                   probe_process: bool = False, maps: dict | None = None) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
-    gives). outcomes / probes: `Experiment.outcomes` / `Experiment.probes` (every train and probe name present).
-    config: the agents' config (not modified; the experiment's buffer caps are applied to a copy, as Experiment
-    does). progress: optional callable(orders_done, orders_total). threads: torch threads while running (default
-    DEFAULT_THREADS), restored afterwards. merge=False: the plain trie, every node stepped (a check on the merging,
-    and its peer in benches/population.py). curves=True: also the probe error after every episode of every order
+    gives), or the same as an (N, n) long tensor (order_tensor). outcomes / probes: `Experiment.outcomes` /
+    `Experiment.probes` (every train and probe name present). config: the agents' config (not modified; the
+    experiment's buffer caps are applied to a copy, as Experiment does). progress: optional callable(orders_done,
+    orders_total). threads: torch threads while running (default DEFAULT_THREADS), restored afterwards.
+    merge=False: the plain trie, every node stepped (a check on the merging, and its peer in
+    benches/population.py). curves=True: also the probe error after every episode of every order
     (one probe reading per stepped state: Figure 2's bands over all orders; off, the run is as fast as before).
+    probe_process=True (with curves, Linux): those probe readings are made on a process of its own, forked here
+    (`_ProbeProcess`), beside the walk: they were half of the population's time on one core. maps: the property
+    maps' state (`Agent.maps.state_dict()`, tensors or arrays) of an agent of this config, developed already (the
+    runner's experiment's): loaded instead of developed again (0.3-0.8 s), as a resumed run loads them.
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
     the predictions themselves, NaN where nothing was recalled), "most_common_knowledge", "agree_fraction",
-    "knowledge_counts", "agent_steps", "distinct_recalls", "nodes_per_level" (trie nodes), "steps_per_level"
+    "knowledge_counts", "agent_steps", "distinct_recalls" (with probe_process, on either process), "nodes_per_level"
+    (trie nodes), "steps_per_level"
     (agent-steps taken, fewer where states merged), "distinct_final_states", "timing_s"}; with curves=True also
     "curves": {"probe_rel_error": per episode, {"values": the distinct errors (rounded as the records), "counts":
     how many orders have each, "none": how many orders cannot predict yet}} (counts, not N numbers per episode:
@@ -224,9 +246,15 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         raise ValueError(f"need at least one train object and one order, got {n} objects and {N} orders")
     if chunk < 1:
         raise ValueError(f"chunk must be >= 1, got {chunk}")
-    if any(len(o) != n for o in orders):
-        raise ValueError(f"every order must list {n} train objects (one per episode)")
-    order_t = torch.tensor(orders, dtype=torch.long)
+    if isinstance(orders, torch.Tensor):   # as train.learning.experiment.order_tensor gives (no lists for 9! rows)
+        if orders.dim() != 2 or orders.shape[1] != n or orders.dtype != torch.long:
+            raise ValueError(f"every order must list {n} train objects (one per episode): an (N, {n}) long tensor, "
+                             f"not {orders.dtype} {tuple(orders.shape)}")
+        order_t = orders
+    else:
+        if any(len(o) != n for o in orders):
+            raise ValueError(f"every order must list {n} train objects (one per episode)")
+        order_t = torch.tensor(orders, dtype=torch.long)
     if int(order_t.min()) < 0 or int(order_t.max()) >= n:
         raise ValueError(f"orders must index the {n} train objects (0..{n - 1})")
     missing = [m for m in train_names if m not in outcomes] + [m for m in probe_names if m not in probes]
@@ -236,6 +264,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     t0 = time.perf_counter()
     old_threads = torch.get_num_threads()
     torch.set_num_threads(threads or DEFAULT_THREADS)
+    walk = None
     try:
         config = copy.deepcopy(config)
         # as Experiment: an agent encodes at most one episode and one object per episode
@@ -244,16 +273,23 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         if config.explore == "active":   # the agents choose their own objects: no prefixes to share
             return _run_active(train_names, probe_names, order_t, outcomes, probes, config, chunk, progress, curves,
                                t0)
-        root = Agent(config, batch=1)
+        root = Agent(config, batch=1, develop=maps is None)
+        if maps is not None:
+            root.maps.load_state_dict({k: torch.as_tensor(v) for k, v in maps.items()})
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
         walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge, curves)
         walk.perceive(root)
+        if curves and probe_process and hasattr(os, "fork"):
+            walk.helper = _ProbeProcess(walk, root)
         A, M = config.hub.max_assemblies, config.memory.max_episodes
         walk.grow(root, (torch.full((1, A), n), torch.full((1, M), n)), None, 0)
+        walk.collect_errors()
         keys, errors, predictions = walk.results()
     finally:
         torch.set_num_threads(old_threads)
+        if walk is not None and walk.helper is not None:
+            walk.helper.close()
     t_end = time.perf_counter()
 
     common, fraction, counts = agreement(keys)
@@ -266,7 +302,8 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
         "agree_fraction": fraction,
         "knowledge_counts": counts,
         "agent_steps": walk.agent_steps,
-        "distinct_recalls": walk.cache.size,
+        "distinct_recalls": walk.cache.size if walk.helper is None else
+        len(_digests(walk.cache.index) | walk.helper.recalls),
         "nodes_per_level": walk.trie.nodes_per_level,
         "steps_per_level": walk.steps_per_level,
         "distinct_final_states": len(walk.leaf_keys),
@@ -279,16 +316,18 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 
 
 def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
-               config: AgentConfig) -> dict:
+               config: AgentConfig, maps: dict | None = None) -> dict:
     """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
     "final_probe_cm3": what the runner asks of its figure process (train/runner/loop.py), which runs it beside the
     detailed orders. Drawn and run in that process, the 9! orders are not sent to it, nor their predictions back."""
     from aesop_torch.malloc import keep_freed_memory
-    from train.learning.experiment import draw_orders
+    from train.learning.experiment import order_tensor
+
+    from train.learning.sim_pool import cores
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
-    out = run_population(train_names, probe_names, draw_orders(len(train_names), orders, seed), outcomes, probes,
-                         config, curves=True)
+    out = run_population(train_names, probe_names, order_tensor(len(train_names), orders, seed), outcomes, probes,
+                         config, curves=True, probe_process=cores() > 1, maps=maps)
     del out["final_probe_cm3"]
     return out
 
@@ -441,6 +480,11 @@ class _Walk:
         # curves: level t (before the last), sorted row -> the probe error of its order after episode t + 1
         self.row_err = torch.full((self.n - 1, self.N), float("nan"), dtype=torch.float64) if curves else None
         self.err_memo: list[dict] = [{} for _ in range(self.n)]   # level t: state digest -> its probe error
+        # a _ProbeProcess reading the probes' errors elsewhere: the rows' errors (row_err) are written once its
+        # answers are in (collect_errors), from what _record_errors and _copy would have written meanwhile
+        self.helper = None
+        self.pending_errors: list[tuple] = []   # (t, ids, digests) of _record_errors
+        self.pending_copies: list[tuple] = []   # (t, lo, hi, src) of _copy
 
     def perceive(self, agent: Agent) -> None:
         """What the agents perceive of each object and probe (Agent.activities), computed once here: in the last bits
@@ -479,14 +523,46 @@ class _Walk:
                 new[d] = i
         if new:
             sub = agents if len(new) == agents.batch else agents.select(torch.tensor(list(new.values())))
-            for d, e in zip(new, median_rel_errors(self._probe_predictions(sub), self.truth)):
-                memo[d] = float("nan") if e is None else round(e, 4)
+            if self.helper is not None:   # read there; its answer written into memo by collect_errors
+                self.helper.send(t, list(new), sub, cached=sub is agents)
+                memo.update(dict.fromkeys(new))
+            else:
+                for d, e in zip(new, median_rel_errors(self._probe_predictions(sub), self.truth)):
+                    memo[d] = float("nan") if e is None else round(e, 4)
+        if self.helper is not None:
+            self.pending_errors.append((t, ids, digests))
+        else:
+            self._write_errors(t, ids, digests)
+        self.probe_s += time.perf_counter() - tic
+
+    def _write_errors(self, t: int, ids: torch.Tensor, digests: list) -> None:
+        """row_err of the orders below the level-t nodes ids, from err_memo[t]."""
+        memo = self.err_memo[t]
         errs = torch.tensor([memo[d] for d in digests], dtype=torch.float64)
         lo, hi = self.trie.lo[t][ids], self.trie.hi[t][ids]
         count = hi - lo
         rows = lo.repeat_interleave(count) + torch.arange(int(count.sum())) - \
             (count.cumsum(0) - count).repeat_interleave(count)
         self.row_err[t, rows] = errs.repeat_interleave(count)
+
+    def collect_errors(self) -> None:
+        """With a _ProbeProcess: its errors into err_memo, then row_err written as _record_errors and _copy would
+        have written it (each copy's source written before it, as in the walk: the copies in their order, after
+        every node's own errors, whose rows no copy touches)."""
+        if self.helper is None:
+            return
+        tic = time.perf_counter()
+        memo, leaves = self.helper.results()
+        for (t, d), e in memo.items():
+            self.err_memo[t][d] = e
+        # the leaves' predictions and errors, in the order _finish sent them (every leaf batch was sent)
+        self.leaf_pred = [torch.from_numpy(pred) for pred, _ in leaves]
+        self.leaf_errors = [e for _, errors in leaves for e in errors]
+        for t, ids, digests in self.pending_errors:
+            self._write_errors(t, ids, digests)
+        for t, lo, hi, src in self.pending_copies:
+            self.row_err[t + 1:, lo:hi] = self.row_err[t + 1:, src:src + hi - lo]
+        self.pending_errors, self.pending_copies = [], []
         self.probe_s += time.perf_counter() - tic
 
     def grow(self, parents: Agent, owners: tuple, pnodes: torch.Tensor | None, t: int) -> None:
@@ -562,7 +638,9 @@ class _Walk:
         tr = self.trie
         lo, hi, src = int(tr.lo[t][node]), int(tr.hi[t][node]), int(tr.lo[t][like])
         self.leaf_of[lo:hi] = self.leaf_of[src:src + hi - lo]
-        if self.row_err is not None:   # the levels below; level t was recorded when `node` was stepped
+        if self.helper is not None:    # once the errors are in (collect_errors)
+            self.pending_copies.append((t, lo, hi, src))
+        elif self.row_err is not None:   # the levels below; level t was recorded when `node` was stepped
             self.row_err[t + 1:, lo:hi] = self.row_err[t + 1:, src:src + hi - lo]
         self._done(hi - lo)
 
@@ -583,10 +661,16 @@ class _Walk:
             result.append(r)
         if new:
             sub = leaves if len(new) == leaves.batch else leaves.select(torch.tensor(new))
-            pred = self._probe_predictions(sub)
-            self.leaf_pred.append(pred)
+            if self.helper is not None:   # predicted there; collect_errors puts them in these places
+                self.helper.send(-1, None, sub, cached=sub is leaves)
+                self.leaf_pred.append(None)
+                self.leaf_errors += [None] * len(new)
+            else:
+                pred = self._probe_predictions(sub)
+                self.leaf_pred.append(pred)
+                self.leaf_errors += [None if e is None else round(e, 4)
+                                     for e in median_rel_errors(pred, self.truth)]
             self.leaf_keys += knowledge_keys(sub.rules.state)
-            self.leaf_errors += [None if e is None else round(e, 4) for e in median_rel_errors(pred, self.truth)]
         tr = self.trie
         lo, hi = tr.lo[-1][ids], tr.hi[-1][ids]
         self.leaf_of[lo] = torch.tensor(result)
@@ -601,3 +685,116 @@ class _Walk:
         cols = [agents.anticipate_acts(acts.expand(B, *acts.shape[1:]), present.expand(B, -1), decoded=False
                                        ).expected for acts, present in self.probe_acts]
         return torch.stack(cols, dim=1) if cols else torch.zeros(B, 0)
+
+
+class _ProbeProcess:
+    """The probe readings of a population's curves (`_Walk._record_errors`) and of its leaves (`_Walk._finish`) on a
+    child process forked from this one (it has the walk's probes and the agents' maps already), fed each batch of
+    new states through a pipe as plain arrays: the walk steps its agents meanwhile. The child reads each batch as
+    the walk reads it (the same agents, the same batch, `_probe_predictions`, a RecallCache where the walk's would
+    be used: its own, so the walk's steps no longer find the probes' recalls there and make them again; a recall
+    is the same whatever batch makes it) and answers, at the end, the rounded error of every (level, digest) and
+    the leaves' predictions. All 9! orders of nine objects, the curves' readings alone moved: 10.3 s of CPU on the
+    walk's process and 6.5 s on the child, against 15.9 s on one (a busy machine).
+
+    The child ignores Ctrl-C, ends at SIGTERM or SIGHUP and dies with this process (sim_pool._die_with); it never
+    returns into the caller's code (os._exit). A child that died is an error here, not a silent gap."""
+
+    def __init__(self, walk: _Walk, template: Agent):
+        from multiprocessing.connection import Connection
+        to_r, to_w = os.pipe()
+        back_r, back_w = os.pipe()
+        parent, threads = os.getpid(), torch.get_num_threads()
+        pid = os.fork()
+        if pid == 0:   # the child
+            code = 1
+            try:
+                os.close(to_w)
+                os.close(back_r)
+                from train.learning.sim_pool import _die_with
+                signal.signal(signal.SIGINT, signal.SIG_IGN)
+                _die_with(parent)
+                torch.set_num_threads(threads)   # the walk's (run_population's `threads`)
+                _serve(walk, template, Connection(to_r, writable=False), Connection(back_w, readable=False))
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(to_r)
+        os.close(back_w)
+        self.pid, self._to, self._back = pid, Connection(to_w, readable=False), Connection(back_r, writable=False)
+        self.recalls = set()   # digests of the recalls the child made (its own RecallCache's keys)
+        # a thread writes the batches, so the walk never waits for the child to take one (a pipe holds 64 kB)
+        self._queue, self._failed = queue.SimpleQueue(), None
+        self._writer = threading.Thread(target=self._write, daemon=True)
+        self._writer.start()
+
+    def _write(self) -> None:
+        while (data := self._queue.get()) is not None:
+            try:
+                self._to.send_bytes(data)
+            except OSError as e:   # the child died: said by results()
+                self._failed = e
+                return
+
+    def send(self, t: int, digests: list, agents: Agent, cached: bool) -> None:
+        """The agents whose states have these digests at level t (-1: leaves, digests None); cached: their memory recalls through the run's
+        RecallCache (as a stepped batch's does, not one selected from it: Agent.select leaves the cache out)."""
+        state = {name: {key: getattr(part, key).numpy() for key in part.state_dict()}
+                 for name, part in (("hub", agents.hub), ("memory", agents.memory), ("rules", agents.rules))}
+        self._queue.put(pickle.dumps((t, digests, cached, state), protocol=pickle.HIGHEST_PROTOCOL))
+
+    def results(self) -> tuple[dict, list]:
+        """({(level, digest): rounded error (NaN: nothing predicted)} of every state sent at a level, [(predictions
+        (B, n_probes), their rounded errors (None: nothing predicted))] of every batch of leaves sent (level -1), in
+        the order sent)."""
+        self._queue.put(pickle.dumps(None))
+        self._queue.put(None)
+        self._writer.join()
+        try:
+            if self._failed is not None:
+                raise EOFError
+            memo, leaves, self.recalls = pickle.loads(self._back.recv_bytes())
+            return memo, leaves
+        except EOFError:
+            raise RuntimeError(f"the population's probe process (pid {self.pid}) died") from None
+
+    def close(self) -> None:
+        """End the child (its answer is in, or the walk ended early) and the writer, then the pipes."""
+        if self.pid is not None:
+            try:
+                os.kill(self.pid, signal.SIGKILL)
+                os.waitpid(self.pid, 0)
+            except (ProcessLookupError, ChildProcessError):
+                pass
+            self.pid = None
+        self._queue.put(None)          # a writer still writing stops at its broken pipe, else here
+        self._writer.join()
+        for conn in (self._to, self._back):
+            conn.close()
+
+
+def _serve(walk: _Walk, template: Agent, inbox, outbox) -> None:
+    """_ProbeProcess's child: read the batches of agents' states until None, then answer their errors."""
+    cache, memo, leaves = RecallCache(), {}, []
+    while (msg := pickle.loads(inbox.recv_bytes())) is not None:
+        t, digests, cached, state = msg
+        agents = template.select(torch.zeros(len(state["memory"]["count"]), dtype=torch.long))
+        for name, buffers in state.items():
+            part = getattr(agents, name)
+            for key, value in buffers.items():
+                setattr(part, key, torch.from_numpy(value))
+        if cached:
+            agents.memory.cache = cache
+        pred = walk._probe_predictions(agents)
+        errors = median_rel_errors(pred, walk.truth)
+        if t < 0:   # leaves, as _Walk._finish reads them
+            leaves.append((pred.numpy(), [None if e is None else round(e, 4) for e in errors]))
+            continue
+        for d, e in zip(digests, errors):
+            memo[(t, d)] = float("nan") if e is None else round(e, 4)
+    outbox.send_bytes(pickle.dumps((memo, leaves, _digests(cache.index)), protocol=pickle.HIGHEST_PROTOCOL))
+
+
+def _digests(keys) -> set:
+    """16-byte digests (blake2b) of a RecallCache's keys: the recalls two processes made, counted once."""
+    return {hashlib.blake2b(k, digest_size=16).digest() for k in keys}

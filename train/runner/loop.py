@@ -350,8 +350,10 @@ def _start_population(args, exp):
     print(f"population: {count_orders(len(exp.train_names), args.orders)} orders side by side on the figure process "
           f"(the first {len(exp.orders)} also run in detail here)", flush=True)
     start_drawer()   # main() started it
+    # the experiment's developed maps go along (as arrays: plain pickles), not developed there again
+    maps = {k: v.numpy() for k, v in exp.agent.maps.state_dict().items()}
     return _OPEN["drawer"].draw("train.learning.population:run_orders", exp.train_names, exp.probe_names,
-                                args.orders, args.seed, exp.outcomes, exp.probes, exp.config)
+                                args.orders, args.seed, exp.outcomes, exp.probes, exp.config, maps)
 
 
 def _draw_figure(exp, out, population):

@@ -138,8 +138,16 @@ def json_safe(x):
     if isinstance(x, dict):
         return {k: json_safe(v) for k, v in x.items()}
     if isinstance(x, (list, tuple)):
+        kinds = set(map(type, x))
+        if kinds <= _PLAIN:   # a population's 362,880 keys: nothing to change, no call per item
+            return list(x)
+        if kinds <= _PLAIN | {float}:   # and its errors: only a float may change
+            return [v if type(v) is not float or math.isfinite(v) else None for v in x]
         return [json_safe(v) for v in x]
     return x
+
+
+_PLAIN = {str, int, bool, type(None)}   # exactly these types (not a subclass): json_safe leaves them as they are
 
 
 def knowledge_table(summary: dict) -> str:
