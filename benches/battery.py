@@ -6,7 +6,7 @@ over naive ones on trial 1.
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
                               [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
 
-Per task (sim/tasks/<task>.json: the 8 studies' tasks and 3 conflict tasks of this project) and condition (model,
+Per task (sim/tasks/<task>.json: the 8 studies' tasks and 6 conflict tasks of this project) and condition (model,
 rules on or off, kind), --subjects independent subjects (train/battery/tasks.py: each its own maps, perception noise,
 positions and choices from its own seed; naive and experienced subjects of one seed are the same animal before
 their histories differ, so conditions are compared paired). Naive subjects have the studies' pre-training, to a
@@ -48,9 +48,13 @@ from record import run_main  # noqa: E402
 MODEL = "contextual"
 TASKS = ("water_vs_sand", "sinking_vs_floating", "solid_vs_hollow", "high_vs_low_water", "narrow_vs_wide", "u_tube",
          "large_vs_small", "water_vs_sawdust")
-# the project's conflict tasks: the option that looks like the pre-training stones is wrong, or the larger sinker is
-# the lighter one; where the jar life is necessary (BENCHMARKS.md, "The Aesop battery")
-CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_light_vs_small_heavy")
+# the project's conflict tasks, where the jar life is necessary (BENCHMARKS.md, "The Aesop battery"): the option
+# that looks like the pre-training stones is wrong (the first two); or size and weight disagree, which the pre-training
+# stones never do (they grow heavier and larger together), so only the fate tells which decides (a sinker raises the
+# water by its volume, a floater by its mass): the larger is right in the next two, the heavier in the last two
+CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_light_vs_small_heavy",
+            "floater_large_light_vs_sinker_small_heavy", "floaters_large_light_vs_small_heavy",
+            "sinker_small_vs_floater_large_light")
 ALL_TASKS = TASKS + CONFLICT
 PNG = ROOT / "benches" / "battery_curves.png"
 BENCHMARKS = ROOT / "BENCHMARKS.md"   # its battery section holds the table (<!-- table:battery -->)
@@ -263,7 +267,7 @@ def main(argv=None) -> None:
                     help=f"models, the first the transfer model of the last line (default {MODEL} paper)")
     ap.add_argument("--kinds", nargs="+", choices=("naive", "experienced"), default=["naive", "experienced"])
     ap.add_argument("--tasks", nargs="+", choices=ALL_TASKS, default=list(ALL_TASKS),
-                    help="tasks to run (default the 8 studies' and the 3 conflict tasks)")
+                    help=f"tasks to run (default the 8 studies' and the {len(CONFLICT)} conflict tasks)")
     ap.add_argument("--ablate", choices=["rules"], action="append", default=[],
                     help="rules: every model also runs with its rules off (the transfer model always does)")
     ap.add_argument("--aim", choices=("gap", "rise"), default="gap",
