@@ -35,6 +35,10 @@ CONFLICT = {
                                             "large_light_floater", floater_rise(8), "weight"),   # 0.4074 cm
     "sinker_small_vs_floater_large_light": ("small_sinker", sinker_rise(3.5),                  # 1.1433 cm
                                             "large_light_floater", floater_rise(8), "weight"),
+    "stones_size_vs_weight_floater": ("large_light", floater_rise(11),                         # 0.5602 cm
+                                      "small_heavy", sinker_rise(2.0), "size"),                  # 0.2133 cm
+    "stones_size_vs_weight_sinkers": ("large_light", sinker_rise(3.2),                         # 0.8738 cm
+                                      "small_heavy", sinker_rise(2.6), "size"),                  # 0.4687 cm
     "large_light_vs_small_heavy": ("large_light", 4 * 45 * math.pi / 4 / (25 * math.pi),     # 3 x 5 cm cylinder: 1.8
                                    "small_heavy", 4 * (1.8 ** 2 * 2.5 * math.pi / 4) / (25 * math.pi), "size"),
 }
@@ -66,15 +70,23 @@ def test_conflict_task_right_answer_in_closed_form(name):
     assert a.rgb == b.rgb and a.shape == b.shape
 
 
-def test_conflict_set_is_balanced_between_size_and_weight():
-    """A chooser by size alone, or by weight alone, is right on half the size-and-weight conflict tasks: the set is
-    built from the physics (which cue decides follows from the fate), not from any subject's choices."""
-    cues = [c[-1] for c in CONFLICT.values()]
-    assert cues.count("size") == cues.count("weight") == 2
+def test_stones_tasks_cross_the_pretraining_stones_size_and_weight():
+    """The stones_size_vs_weight tasks: each option has one pre-training stone's size and another stone's weight,
+    crosswise, in the stones' colour and shape, so resembling a stone cannot decide between them."""
+    from train.battery.tasks import STONE_RGB
+    sizes = {s[2][0]: s[0] for s in PRETRAIN_STONES}
+    masses = {s[3]: s[0] for s in PRETRAIN_STONES}
+    for name in ("stones_size_vs_weight_floater", "stones_size_vs_weight_sinkers"):
+        t = load_task(TASKS / f"{name}.json")
+        a, b = t.objects
+        like = [(sizes[o.dims_cm[0]], masses[o.mass_g]) for o in (a, b)]
+        assert like[0] == like[1][::-1] and like[0][0] != like[0][1], (name, like)
+        assert a.shape == b.shape == "sphere" and a.rgb == b.rgb == pytest.approx(STONE_RGB)
 
 
 @pytest.mark.parametrize("name", ["floater_large_light_vs_sinker_small_heavy", "floaters_large_light_vs_small_heavy",
-                                  "sinker_small_vs_floater_large_light"])
+                                  "sinker_small_vs_floater_large_light", "stones_size_vs_weight_floater",
+                                  "stones_size_vs_weight_sinkers"])
 def test_conflict_task_against_physics(name):
     """Each option dropped once from the file's levels (the first drop of a trial, which transfer scores) rises in
     the physics as in the closed form; the right object dropped 3 times from a trial's start reaches in the physics
