@@ -113,3 +113,22 @@ def test_conflict_task_against_physics(name):
     finally:
         p.disconnect(cl)
     assert levels[-2] < reach <= levels[-1], levels
+
+
+def test_every_task_file_is_on_the_bench_once():
+    """Each of sim/tasks (but crows.json, the goal trials' file) is a task of benches/battery.py: a study's, a
+    conflict task of the last line's, or a size-and-weight task reported apart; none in two groups."""
+    import importlib.util
+    import sys
+    root = TASKS.parents[1]
+    spec = importlib.util.spec_from_file_location("battery_bench", root / "benches" / "battery.py")
+    sys.path.insert(0, str(root / "benches"))
+    try:
+        bench = importlib.util.module_from_spec(spec)
+        spec.loader.exec_module(bench)
+    finally:
+        sys.path.remove(str(root / "benches"))
+    files = {f.stem for f in TASKS.glob("*.json")} - {"crows"}
+    groups = (bench.TASKS, bench.CONFLICT, bench.SIZE_WEIGHT)
+    assert sorted(t for g in groups for t in g) == sorted(files)
+    assert set(bench.ALL_TASKS) == files
