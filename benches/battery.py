@@ -55,8 +55,8 @@ TASKS = ("water_vs_sand", "sinking_vs_floating", "solid_vs_hollow", "high_vs_low
 # seeds 1000-1003 (issue 46 point 4), decided before any run on the bench's seeds
 CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_light_vs_small_heavy",
             "stones_size_vs_weight_floater", "stones_size_vs_weight_sinkers")
-# size and weight disagree as in the stones' tasks, but the options look like no stone (grey spheres larger than the
-# stones, or lighter): naive subjects were right on seeds 1000-1003 (0.98-1.00), so the jar life is not necessary
+# size and weight disagree as in the stones' tasks, but the options look like no stone (grey spheres, off the stones'
+# sizes and weights): naive subjects were right on seeds 1000-1003 (0.98-1.00), so the jar life is not necessary
 # there; reported per task and apart, not in the last line
 SIZE_WEIGHT = ("floater_large_light_vs_sinker_small_heavy", "floaters_large_light_vs_small_heavy",
                "sinker_small_vs_floater_large_light")
@@ -394,7 +394,8 @@ def main(argv=None) -> None:
             print(f"  {name}: {interval(g)} n={g['n']} p={g['p']:.2g}")
     every_conflict = [t for t in CONFLICT + SIZE_WEIGHT if t in tasks]
     if every_conflict != conflict:
-        for name, ab in (("every conflict task (the size-and-weight ones too), rules on", ()), ("rules off", ("rules",))):
+        for name, ab in (("every conflict task (the size-and-weight ones too), rules on", ()),
+                         ("rules off", ("rules",))):
             g = gain(ab, every_conflict)
             if g is not None:
                 print(f"  {name}: {interval(g)} n={g['n']} p={g['p']:.2g}")
