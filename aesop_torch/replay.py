@@ -137,6 +137,7 @@ def derive(rules, config) -> None:
     changed, unclear = changed[:, None], unclear[:, None]                                    # (B, 1, N, P)
     clear_full = changed & ~unclear.any(-1, keepdim=True)
     signed_on = "signed" not in config.ablate
+    tally = "tally" not in config.ablate
     ordered = (sign != 0)[:, None]
     agrees = (sign[:, None] * osign[..., None]) > 0                                          # (B, C, N, P)
 
@@ -151,12 +152,24 @@ def derive(rules, config) -> None:
         clean = dp.sum(-1) == 1
         return use, dp, clean
 
+    def clean_for(use, dp):
+        """(B, C, N, P) the pairs clean for each property as if its pathway were live: it changed, nothing else live
+        did (for a live property, the pair is clean; for an eliminated one, what it would show at full strength)."""
+        return changed & use[..., None] & ((dp.sum(-1, keepdim=True) - dp.long()) == 0)
+
     def eliminations(grown):
-        """The least fixpoint of Elimination (reward contexts) given the grown properties, the fate's derived."""
+        """The least fixpoint of Elimination (reward contexts) given the grown properties, the fate's derived: a
+        property goes when its clean held pairs are at least elim_pairs and at least elim_share of its clean pairs
+        (held and moved, each judged as if it were live)."""
         elim = torch.zeros(B, C, P, dtype=torch.bool)
         for _ in range(C * P + 1):
             use, dp, clean = judge(elim)
-            cand = (dp & (use & ~dc & clean)[..., None]).any(2)                              # (B, C, P)
+            cp = clean_for(use, dp)
+            n_held, n_moved = (cp & (use & ~dc)[..., None]).sum(2), (cp & (use & dc)[..., None]).sum(2)
+            if tally:
+                cand = (n_held >= config.elim_pairs) & (n_held >= config.elim_share * (n_held + n_moved))
+            else:   # one clean held pair is enough (the sequential rules' Elimination, replayed)
+                cand = (dp & (use & ~dc & clean)[..., None]).any(2)                          # (B, C, P)
             new = (elim | cand) & ~grown
             if contexts:
                 new[:, FATE] = elim[:, FLOATING] & elim[:, SINKING] & ~grown[:, FATE]

@@ -6,7 +6,7 @@ from __future__ import annotations
 
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"),                            # and .ABLATIONS
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
              "extended": ("rules", "gating", "prior")}
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
 # and ABLATIONS, so that a model or a part added is listed; tests/test_run_cli.py checks every one has its line)
@@ -31,6 +31,8 @@ ABLATION_HELP = {
               "from every pair of episodes lived after each episode",
     "signed": "replay without signed consistency (Growth on a property whose change had the outcome's sign in every "
               "clear contradicted pair)",
+    "tally": "replay's Elimination on any clean pair whose outcome held, instead of only where such pairs are at "
+             "least elim_share of the property's clean pairs (held and moved)",
 }
 
 
