@@ -311,4 +311,7 @@ class AgentConfig:
         if d.get("model") == "contextual" and "fate_boundary_ridge" not in d:
             # a contextual agent from before the fate boundary learned with the recalled fates' vote: it goes on so
             d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "boundary"]))
+        if d.get("model") == "contextual" and "elim_share" not in d:
+            # a contextual agent from before the counted Elimination eliminated on one clean held pair: it goes on so
+            d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "tally"]))
         return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})

@@ -261,3 +261,13 @@ def test_elimination_needs_elim_pairs_agreeing_held_pairs(developed):
         assert (agent.rules.strength[0, SINKING, WEIGHT] <= 0.1) == after_two, (k, agent.rules.strength)
         drop(agent, cube(5.0, 3500), 125.0, True)
         assert agent.rules.strength[0, SINKING, WEIGHT] <= 0.1, (k, agent.rules.strength)
+
+
+def test_a_contextual_config_from_before_the_counted_elimination_keeps_the_rule_it_learned_with():
+    old = AgentConfig.contextual().to_dict()
+    del old["elim_share"]
+    assert AgentConfig.from_dict(old).ablate == ("tally",)
+    assert AgentConfig.from_dict(AgentConfig.contextual().to_dict()).ablate == ()
+    paper = AgentConfig.paper().to_dict()      # the paper model has no replay
+    del paper["elim_share"]
+    assert AgentConfig.from_dict(paper).ablate == ()
