@@ -231,8 +231,8 @@ def _a_noisy_held_pair(developed, ablate):
     7.2 cm displacing 373 (size alone changed against both, the reward moved), and 8.6 cm of 4000 g displacing 636
     (size and weight changed). Size's clean pairs among sinkers: 1 held, 2 moved, a share of 1/3 held (below
     elim_share): it stays, and grows on its two clean moved pairs. Eliminated on the one held pair (the tally
-    ablated), size would be eliminated for floaters and sinkers, so for the fate too: known to matter nowhere, it
-    could not grow back, and weight (clean once size is gone) would take its place."""
+    ablated), size is eliminated for floaters and sinkers, so for the fate too: known to matter nowhere, it cannot
+    grow back (the collapse of the lives of 230)."""
     agent = fresh(developed, ablate)
     drop(agent, cube(8.0, 100), 100.0, False)
     drop(agent, cube(10.0, 100), 100.0, False)
