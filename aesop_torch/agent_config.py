@@ -22,7 +22,7 @@ AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in rang
 
 MODELS = ("paper", "contextual", "extended")
 ABLATIONS = {"paper": ("rules", "gating"),
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
@@ -201,6 +201,19 @@ class AgentConfig:
     # time in two (a property unrelated to the outcome), three one in four, and each more pair halves it again; 3 is
     # the fewest that a set of 24 (a handful of floaters) still reaches
     signed_pairs: int = 3
+    # contextual, replay: Elimination of a property in a reward context needs at least this many clean pairs whose
+    # outcome held. One, as the paper's rule: its episode 2 (two cylinders alike but for colour) eliminates colour on
+    # one pair, and the share below is what keeps a noisy held pair from eliminating a true cause. Final knowledge
+    # re-derived from lives of 230 (tuning seeds 1000-1001) at 24 / 64 / 128 / 230: the same at 1, 2 and 3, but for
+    # fill and elongation left undecided among floaters after 24 at 2 and 3
+    elim_pairs: int = 1
+    # ... and its clean held pairs at least this share of its clean pairs, held and moved (each judged as if the
+    # property were live). Replay judges every pair of a life, ~26,000 at 230 objects, and a few look clean with the
+    # outcome held by noise or a cancellation (larger but hollower, the fill in its dead zone): with one such pair
+    # enough, size and fill went among sinkers in every life of 230 (bench seeds 0-2, tuning seeds 1000-1001). A true
+    # cause's clean changes move the outcome nearly always; a property that does not matter has (almost) no clean
+    # moved pair, so the share's value barely matters: 0.8 and 0.9 gave the same knowledge (tuning seed 1000)
+    elim_share: float = 0.9
     # contextual: the cue of each recall reads a context's strengths up to this (None: as they are). Knowledge then
     # reaches recall by what it rules out (an eliminated pathway at 0.05, a doubtful one decayed by Uncertainty),
     # not by amplifying a dominant one to 3: in the fate's recall weight alone is dominant long before fill and
@@ -266,6 +279,9 @@ class AgentConfig:
             raise ValueError(f"AgentConfig.explore must be one of {', '.join(EXPLORE)}, got {self.explore!r}")
         if not (isinstance(self.signed_pairs, int) and self.signed_pairs >= 1):
             raise ValueError(f"AgentConfig.signed_pairs must be an integer >= 1, got {self.signed_pairs!r}")
+        if not (isinstance(self.elim_pairs, int) and self.elim_pairs >= 1) or not 0.0 <= self.elim_share <= 1.0:
+            raise ValueError(f"AgentConfig.elim_pairs must be an integer >= 1 and elim_share in 0..1, got "
+                             f"{self.elim_pairs!r}, {self.elim_share!r}")
         if not self.recall_sharpness > 0:
             raise ValueError(f"AgentConfig.recall_sharpness must be > 0, got {self.recall_sharpness}")
         self.delta_p_band = tuple((float(lo), float(hi)) for lo, hi in self.delta_p_band)
@@ -295,4 +311,7 @@ class AgentConfig:
         if d.get("model") == "contextual" and "fate_boundary_ridge" not in d:
             # a contextual agent from before the fate boundary learned with the recalled fates' vote: it goes on so
             d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "boundary"]))
+        if d.get("model") == "contextual" and "elim_share" not in d:
+            # a contextual agent from before the counted Elimination eliminated on one clean held pair: it goes on so
+            d["ablate"] = list(dict.fromkeys([*d.get("ablate", ()), "tally"]))
         return cls(**{k: parts[k](**v) if k in parts else tuple(v) if k == "ablate" else v for k, v in d.items()})

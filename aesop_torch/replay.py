@@ -11,11 +11,14 @@ decoded values, its outcome as the memory holds it (through the reward code) and
 Each pair is compared once, when its later episode is lived (`add_episode`: only the new episode's pairs are new),
 at full strength, and cached (DeltaProperty changed / unclear per property, the sign of each ordered property's change,
 DeltaContradiction, the outcome's dead zone and its sign). The knowledge is then derived from the cache (`derive`)
-with the rules' judgments, every pair at once:
+with the rules' judgments, every pair at once (each distinct pattern of pairs judged once and counted, `patterns`):
 
-- Elimination, in the floating and sinking contexts only, on a clean pair (one property changed among those the
-  context still shows) whose reward held. Iterated to a fixpoint: an eliminated pathway shows no change, so more
-  pairs become clean.
+- Elimination, in the floating and sinking contexts only, on the clean pairs (one property changed among those the
+  context still shows) whose reward held, counted: at least `AgentConfig.elim_pairs` of them, and at least
+  `elim_share` of the property's clean pairs, held and moved, each judged as if the property were live. Among the
+  ~26,000 pairs of a life of 230 a few look clean with the reward held by noise or a cancellation; a true cause's
+  many clean moved pairs outvote them (`--ablate tally`: any clean held pair eliminates). Iterated to a fixpoint:
+  an eliminated pathway shows no change, so more pairs become clean.
 - No Elimination in the fate context: the fate is a boundary (sink or float), so most single-property changes leave
   it as it was, a true cause included. A property is irrelevant to the fate once both reward contexts eliminated it.
 - Growth on a clean pair whose outcome moved (for the fate: a clean flip), and on the one eliminated property that
@@ -107,6 +110,36 @@ def add_episode(rules, values: dict, outcome: torch.Tensor, fate: torch.Tensor, 
     rules.cached_count.copy_(rules.lived_count)
 
 
+def patterns(pairs, seen, fi, fj, dc, uc, osign, changed, unclear, sign):
+    """The pairs (each (B, N), or (B, N, P) per property) as their distinct patterns: (w, the same tensors over U
+    patterns), w (B, U) how many of each agent's pairs show each pattern (0: none). A life of 230 has ~26,000 pairs
+    and a few thousand patterns (per property changed, unclear or neither, and the sign of its change; the outcome's;
+    the two fates), and derive's fixpoints judge each pattern once instead of each pair."""
+    B, N = pairs.shape
+    kind = torch.where(fi == fj, fi.clamp(min=0) + 2, torch.where(fi > fj, 4, 5))   # 2..5: ff ss sf fs
+    kind = torch.where(seen, kind, pairs.long())                                    # 1: a pair, a fate unseen
+    code = ((kind * 2 + dc) * 2 + uc) * 3 + osign.long() + 1
+    for p in range(changed.shape[-1]):
+        code = (code * 3 + changed[..., p] * 2 + unclear[..., p]) * 3 + sign[..., p].long() + 1
+    ok = kind > 0
+    u, inv = torch.unique(code[ok], return_inverse=True)
+    w = torch.zeros(B, len(u), dtype=torch.long)
+    w.index_put_((torch.arange(B)[:, None].expand(B, N)[ok], inv), torch.ones_like(inv), accumulate=True)
+    digits = []
+    for _ in range(changed.shape[-1]):
+        digits.append((u % 3 - 1, u // 3 % 3))
+        u = u // 9
+    sign = torch.stack([s for s, _ in digits[::-1]], -1).to(torch.int8)
+    state = torch.stack([c for _, c in digits[::-1]], -1)
+    osign, u = (u % 3 - 1).to(torch.int8), u // 3
+    uc, u = (u % 2).bool(), u // 2
+    dc, kind = (u % 2).bool(), u // 2
+    fi = torch.tensor([-1, -1, 0, 1, 1, 0])[kind]
+    fj = torch.tensor([-1, -1, 0, 1, 0, 1])[kind]
+    out = (kind >= 1, kind >= 2, fi, fj, dc, uc, osign, state == 2, state == 1, sign)
+    return w, tuple(x[None].expand(B, *x.shape) for x in out)
+
+
 @torch.no_grad()
 def derive(rules, config) -> None:
     """Re-derive the rules' strengths and firing counts from every cached pair (see the module's doc)."""
@@ -123,8 +156,11 @@ def derive(rules, config) -> None:
     fi, fj = f[:, i], f[:, j]
     seen = pairs & (fi >= 0) & (fj >= 0)
     pick = lambda t: t[:, :m, :m][:, i, j]                                                   # noqa: E731
-    r_dc, r_uc, r_os = pick(rules.pair_dc), pick(rules.pair_uc), pick(rules.pair_osign)
-    changed, unclear, sign = pick(rules.pair_changed), pick(rules.pair_unclear), pick(rules.pair_sign)  # (B, N, P)
+    w, (pairs, seen, fi, fj, r_dc, r_uc, r_os, changed, unclear, sign) = patterns(
+        pairs, seen, fi, fj, pick(rules.pair_dc), pick(rules.pair_uc), pick(rules.pair_osign),
+        pick(rules.pair_changed), pick(rules.pair_unclear), pick(rules.pair_sign))
+    # from here a "pair" is one pattern of pairs, counted w (B, N) times in each agent: every judgment below is a
+    # count over pairs (or whether there is one), so judging each pattern once gives the same counts
     contexts = "context" not in config.ablate
     if contexts:
         in_ctx = torch.stack([seen & (fi == 0) & (fj == 0), seen & (fi == 1) & (fj == 1), seen], 1)   # (B, C, N)
@@ -134,9 +170,16 @@ def derive(rules, config) -> None:
     else:   # the "context" ablation: every pair judged on its reward, alike in all three
         in_ctx, dc = pairs[:, None].expand(-1, C, -1), r_dc[:, None].expand(-1, C, -1)
         uc, osign = r_uc[:, None].expand(-1, C, -1), r_os[:, None].expand(-1, C, -1)
+    in_ctx = in_ctx & (w > 0)[:, None]
+    w4 = w[:, None, :, None]
+
+    def count(x):
+        """(B, C, P) how many pairs x (B, C, N, P) holds."""
+        return (x * w4).sum(2)
     changed, unclear = changed[:, None], unclear[:, None]                                    # (B, 1, N, P)
     clear_full = changed & ~unclear.any(-1, keepdim=True)
     signed_on = "signed" not in config.ablate
+    tally = "tally" not in config.ablate
     ordered = (sign != 0)[:, None]
     agrees = (sign[:, None] * osign[..., None]) > 0                                          # (B, C, N, P)
 
@@ -151,12 +194,24 @@ def derive(rules, config) -> None:
         clean = dp.sum(-1) == 1
         return use, dp, clean
 
+    def clean_for(use, dp):
+        """(B, C, N, P) the pairs clean for each property as if its pathway were live: it changed, nothing else live
+        did (for a live property, the pair is clean; for an eliminated one, what it would show at full strength)."""
+        return changed & use[..., None] & ((dp.sum(-1, keepdim=True) - dp.long()) == 0)
+
     def eliminations(grown):
-        """The least fixpoint of Elimination (reward contexts) given the grown properties, the fate's derived."""
+        """The least fixpoint of Elimination (reward contexts) given the grown properties, the fate's derived: a
+        property goes when its clean held pairs are at least elim_pairs and at least elim_share of its clean pairs
+        (held and moved, each judged as if it were live)."""
         elim = torch.zeros(B, C, P, dtype=torch.bool)
         for _ in range(C * P + 1):
             use, dp, clean = judge(elim)
-            cand = (dp & (use & ~dc & clean)[..., None]).any(2)                              # (B, C, P)
+            cp = clean_for(use, dp)
+            n_held, n_moved = count(cp & (use & ~dc)[..., None]), count(cp & (use & dc)[..., None])
+            if tally:
+                cand = (n_held >= config.elim_pairs) & (n_held >= config.elim_share * (n_held + n_moved))
+            else:   # one clean held pair is enough (the sequential rules' Elimination, replayed)
+                cand = (dp & (use & ~dc & clean)[..., None]).any(2)                          # (B, C, P)
             new = (elim | cand) & ~grown
             if contexts:
                 new[:, FATE] = elim[:, FLOATING] & elim[:, SINKING] & ~grown[:, FATE]
@@ -170,25 +225,25 @@ def derive(rules, config) -> None:
         elim = eliminations(grown)
         use, dp, clean = judge(elim)
         moved = use & dc
-        n_grow = (dp & (moved & clean)[..., None]).sum(2)
+        n_grow = count(dp & (moved & clean)[..., None])
         # an outcome nothing live explains: the one eliminated property that changed clearly, unless eliminated
         # everywhere
         nowhere = elim.all(1)[:, None, None, :]
         back = clear_full & elim[:, :, None, :] & ~nowhere & (moved & ~dp.any(-1))[..., None]
         back &= back.sum(-1, keepdim=True) == 1
-        n_grow = n_grow + back.sum(2)
+        n_grow = n_grow + count(back)
         if signed_on:
             clear = changed & ~elim[:, :, None, :] & moved[..., None] & ordered
-            n_clear, n_agree = clear.sum(2), (clear & agrees).sum(2)
+            n_clear, n_agree = count(clear), count(clear & agrees)
             n_grow = n_grow + ((n_clear >= config.signed_pairs) & (n_agree == n_clear)) * n_agree
         new = grown | (n_grow > 0)
         if torch.equal(new, grown):
             break
         grown = new
     undecided = ~elim & ~grown
-    n_unc = (~dp & ~elim[:, :, None, :] & moved[..., None]).sum(2) * undecided
+    n_unc = count(~dp & ~elim[:, :, None, :] & moved[..., None]) * undecided
     # the held pairs where an eliminated property alone changed (it shows no change now: count it at full strength)
-    n_elim = (changed & (use & ~dc & ~dp.any(-1))[..., None]).sum(2) * elim
+    n_elim = count(changed & (use & ~dc & ~dp.any(-1))[..., None]) * elim
     if contexts:
         n_elim[:, FATE] = elim[:, FATE].long()                            # the fate's: derived, counted once
     s = torch.ones(B, C, P)

@@ -10,7 +10,8 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 - paper, paper -rules (no rule fires: the strengths stay at 1), paper -gating (the cue ignores the strengths);
 - contextual and its ablations (-rules, -gating, -context, -fit, -boundary: the expected fate by the recalled fates'
   vote instead of a fitted boundary, -replay: today's sequential rules instead of the knowledge re-derived from every
-  pair lived, -signed: no signed consistency), and contextual +active: the robot chooses its next object
+  pair lived, -signed: no signed consistency, -tally: replay's Elimination on any clean pair whose outcome held
+  instead of on a share of the property's clean pairs), and contextual +active: the robot chooses its next object
   (`explore = "active"`, aesop_torch/exploration.py) from the teacher's first;
 - extended, extended -rules, extended -prior (its readout without the physics priors);
 - on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
@@ -81,7 +82,7 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual -gating": ("contextual", ("gating",)), "contextual -context": ("contextual", ("context",)),
           "contextual -fit": ("contextual", ("fit",)),
           "contextual -boundary": ("contextual", ("boundary",)), "contextual -replay": ("contextual", ("replay",)),
-          "contextual -signed": ("contextual", ("signed",)),
+          "contextual -signed": ("contextual", ("signed",)), "contextual -tally": ("contextual", ("tally",)),
           "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
@@ -410,7 +411,7 @@ def main():
         ctx["contextual_active_err_24"] = (err("24", "contextual +active", 24)
                                            if "contextual +active" in conditions and a.long_sets else "n/a")
         ctx["contextual_life_time_ratio"] = ratio_t
-        for c in ("contextual -context", "contextual -replay", "contextual -signed"):
+        for c in ("contextual -context", "contextual -replay", "contextual -signed", "contextual -tally"):
             if c in conditions:
                 line[c.replace(" -", "_") + "_off_ratio_230"] = ratio(
                     c, "contextual", "life", last)

@@ -7,7 +7,7 @@ from __future__ import annotations
 
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"),                            # and .ABLATIONS
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
              "extended": ("rules", "gating", "prior")}
 EXPLORE = ("teacher", "active")                                       # aesop_torch.exploration.EXPLORE
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
@@ -33,6 +33,8 @@ ABLATION_HELP = {
               "from every pair of episodes lived after each episode",
     "signed": "replay without signed consistency (Growth on a property whose change had the outcome's sign in every "
               "clear contradicted pair)",
+    "tally": "replay's Elimination on any clean pair whose outcome held, instead of only where such pairs are at "
+             "least elim_share of the property's clean pairs (held and moved)",
 }
 
 
