@@ -89,8 +89,9 @@ PUBLISHED = {   # task: (crows, rooks, jays, children)
     "high_vs_low_water": (f"passed ({JELBERT})", NOT_TESTED, NOT_TESTED,
                           f"passed on trial 1, 5-9 y, no feedback ({MILLER17})"),
     "narrow_vs_wide": (f"failed ({JELBERT})", NOT_TESTED, NOT_TESTED,
-                       f"tested, forced choice without feedback, 5-9 y ({MILLER17}); its result not checked here "
-                       f"(the abstract held offline is cut before it)"),
+                       f"forced choice without feedback ({MILLER17}): 5-7 y not right on trial 1 (only large vs small "
+                       f"and high vs low were), learned most of the other conditions over 5 trials; 8-9 y right on "
+                       f"trial 1 in most conditions (this task's own figures: abstract only)"),
     "u_tube": (f"failed ({JELBERT}); modified U-tube failed as a group, one bird passed ({LOGAN})", NOT_TESTED,
                f"failed ({JAYS})", f"8-10 y passed from trial 1, 5-7 y as the birds ({CHILDREN})"),
     "large_vs_small": (NOT_TESTED, f"passed ({BIRD})", NOT_TESTED,
