@@ -10,7 +10,7 @@ from pathlib import Path
 
 import torch
 
-from in_process import run_main
+from in_process import run_main, wait_until_unlocked
 
 ROOT = Path(__file__).resolve().parents[1]
 OBJECTS = {"train": [
@@ -54,6 +54,7 @@ def test_resume_alone_continues_the_run_bit_identical(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (out / "summary.json").exists(), "the run finished before it could be killed"
+    wait_until_unlocked(out)   # its workers' exit, before a resume in this process
     # a flag that contradicts the run's settings: one line naming the stored value, nothing changed
     for other, said in ((["--seed", "3"], "--seed 3 contradicts the run's seed 1"),
                         (["--orders", "2"], "--orders 2 contradicts the run's orders 1"),

@@ -11,7 +11,7 @@ from pathlib import Path
 import pytest
 import torch
 
-from in_process import run_main
+from in_process import run_main, wait_until_unlocked
 
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"train": [
@@ -159,6 +159,7 @@ def test_killed_run_resumes_to_the_same_summary(paper_file, tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (out / "summary.json").exists(), "the run finished before it could be killed"
+    wait_until_unlocked(out)   # its workers' exit, before a resume in this process
     assert 1 <= torch.load(ckpt, weights_only=True)["experiment"]["t"] < 3
     r = run_main(*args, "--out", out, "--resume")
     assert r.returncode == 0, r.stderr
