@@ -18,7 +18,8 @@ def run_scripts(runs: list[list[str]], cwd, timeout: float = 300) -> list[subpro
     r = subprocess.run([sys.executable, __file__], input=json.dumps([[str(a) for a in run] for run in runs]),
                        capture_output=True, text=True, cwd=cwd, timeout=timeout)
     assert r.returncode == 0, r.stderr
-    return [subprocess.CompletedProcess(run, code, out, err) for run, (code, out, err) in zip(runs, json.loads(r.stdout))]
+    answers = json.loads(r.stdout)
+    return [subprocess.CompletedProcess(run, code, out, err) for run, (code, out, err) in zip(runs, answers)]
 
 
 def _child(script: str, args: list[str], out_fd: int, err_fd: int) -> None:
@@ -53,7 +54,7 @@ def _child(script: str, args: list[str], out_fd: int, err_fd: int) -> None:
 
 
 def _main() -> None:
-    import torch  # noqa: F401  the import every bench makes, once here for every child
+    import torch  # noqa: F401 (the import every bench makes, once here for every child)
     results = []
     for script, *args in json.load(sys.stdin):
         with tempfile.TemporaryFile() as out, tempfile.TemporaryFile() as err:
