@@ -9,6 +9,8 @@ from pathlib import Path
 
 import pytest
 
+from forked_scripts import run_scripts
+
 BENCHES = Path(__file__).resolve().parents[1] / "benches"
 spec = importlib.util.spec_from_file_location("cli_args", BENCHES / "cli_args.py")
 cli_args = importlib.util.module_from_spec(spec)
@@ -42,16 +44,25 @@ def run_script(name: str, *args: str) -> subprocess.CompletedProcess:
                           cwd=BENCHES.parent)
 
 
+@pytest.fixture(scope="module")
+def answers() -> dict:
+    """Every script's answer to --help and to a bad flag, from one interpreter that forks a child per run
+    (tests/forked_scripts.py: each child runs the script as __main__ with its own argv, output and exit code)."""
+    runs = [(name, flag) for name in SCRIPTS for flag in ("--help", "--no-such-flag")]
+    done = run_scripts([[BENCHES / name, flag] for name, flag in runs], cwd=BENCHES.parent)
+    return dict(zip(runs, done))
+
+
 @pytest.mark.parametrize("name", SCRIPTS)
-def test_every_bench_answers_help_and_runs_nothing(name):
-    r = run_script(name, "--help")
+def test_every_bench_answers_help_and_runs_nothing(name, answers):
+    r = answers[name, "--help"]
     assert r.returncode == 0 and "Traceback" not in r.stderr, r.stderr
     assert f"usage: {name}" in r.stdout and "-h, --help" in r.stdout
 
 
 @pytest.mark.parametrize("name", SCRIPTS)
-def test_every_bench_refuses_a_bad_flag_in_one_line(name):
-    r = run_script(name, "--no-such-flag")
+def test_every_bench_refuses_a_bad_flag_in_one_line(name, answers):
+    r = answers[name, "--no-such-flag"]
     assert r.returncode == 2 and "Traceback" not in r.stderr, r.stderr
     assert r.stderr.strip().splitlines()[-1] == f"{name}: error: unrecognized arguments: --no-such-flag"
 

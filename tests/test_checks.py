@@ -6,13 +6,12 @@ import json
 import math
 import os
 import random
-import subprocess
-import sys
 import types
 from pathlib import Path
 
 import pytest
 
+from in_process import run_main
 from sim.input_files import InputFileError, loads, read_json
 from sim.objects import ObjectsFileError, load_objects
 from train.common.config import ConfigError, load_toml, resolve
@@ -31,9 +30,9 @@ def refusal(overrides: dict, objects=DEFAULT, given=None) -> ConfigError:
     return e.value
 
 
-def run_cli(*args, timeout=120):
-    return subprocess.run([sys.executable, str(ROOT / "train" / "run.py"), *args], capture_output=True, text=True,
-                          timeout=timeout)
+def run_cli(*args):
+    """train/run.py's main() in this process (tests/in_process.py): the run through the CLI without an interpreter."""
+    return run_main(*args)
 
 
 @pytest.fixture(scope="module")

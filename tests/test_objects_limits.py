@@ -11,6 +11,7 @@ from pathlib import Path
 import pytest
 
 from aesop_torch.hub import HubConfig
+from in_process import run_main
 from aesop_torch.memory import MemoryConfig
 from sim.objects import MAX_FILE_BYTES, ObjectsConfig, ObjectsFileError, parse_objects
 from sim.sensor_model import SensorModel
@@ -57,9 +58,7 @@ def test_as_many_objects_as_the_file_allows_are_admitted():
 def test_the_runner_refuses_a_life_its_memory_or_hub_cannot_hold_before_writing_anything(tmp_path, sets, words):
     f = tmp_path / "many.json"
     f.write_text(json.dumps({"train": [cube(i) for i in range(231)]}))
-    r = subprocess.run([sys.executable, str(ROOT / "train" / "run.py"), "--objects", str(f), "--orders", "1",
-                        "--out", str(tmp_path / "o"), *[a for s in sets for a in ("--set", s)]],
-                       capture_output=True, text=True, timeout=180)
+    r = run_main("--objects", f, "--orders", "1", "--out", tmp_path / "o", *[a for s in sets for a in ("--set", s)])
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "231 train objects" in lines[0] and words in lines[0], r.stderr
     part = words.split(".")[0]

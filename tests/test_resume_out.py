@@ -10,6 +10,8 @@ from pathlib import Path
 
 import torch
 
+from in_process import run_main, wait_until_unlocked
+
 ROOT = Path(__file__).resolve().parents[1]
 OBJECTS = {"train": [
     {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420},
@@ -39,7 +41,7 @@ def test_resume_alone_continues_the_run_bit_identical(tmp_path):
     args = ["--objects", str(objects_file(tmp_path)), "--orders", "1", "--seed", "1", "--physics", "per-episode",
             "--set", "recall_sharpness=8"]
     whole = tmp_path / "whole"
-    assert run(*args, "--out", str(whole)).returncode == 0
+    assert run_main(*args, "--out", whole).returncode == 0   # in this process: SIGKILL's run is the next one
     out = tmp_path / "killed"
     proc = subprocess.Popen([sys.executable, str(ROOT / "train" / "run.py"), *args, "--out", str(out)],
                             stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -52,6 +54,7 @@ def test_resume_alone_continues_the_run_bit_identical(tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (out / "summary.json").exists(), "the run finished before it could be killed"
+    wait_until_unlocked(out)   # its workers' exit, before a resume in this process
     # a flag that contradicts the run's settings: one line naming the stored value, nothing changed
     for other, said in ((["--seed", "3"], "--seed 3 contradicts the run's seed 1"),
                         (["--orders", "2"], "--orders 2 contradicts the run's orders 1"),
@@ -59,20 +62,20 @@ def test_resume_alone_continues_the_run_bit_identical(tmp_path):
                         (["--model", "extended"], "contradicts the run's model"),
                         (["--physics", "cached"], "contradicts the run's physics per-episode")):
         before = ckpt.read_bytes()
-        assert said in one_line(run("--resume", "--out", str(out), *other, timeout=120))
+        assert said in one_line(run_main("--resume", "--out", out, *other))
         assert ckpt.read_bytes() == before and not (out / "summary.json").exists()
     # without run.json (a run from before it, or the file removed) the flags are the run's only account of itself:
     # the refusal says the directory holds none and names the checkpoint's setting that differs, nothing changed
     (out / "run.json").rename(tmp_path / "run.json")
     before = ckpt.read_bytes()
-    line = one_line(run("--resume", "--out", str(out), timeout=120))
+    line = one_line(run_main("--resume", "--out", out))
     assert f"{out} holds no run.json" in line and "other objects" in line and "orders_arg" not in line, line
-    line = one_line(run("--resume", "--out", str(out), "--objects", args[1], timeout=120))
+    line = one_line(run_main("--resume", "--out", out, "--objects", args[1]))
     assert f"{out} holds no run.json" in line and "its checkpoint ran --seed 1" in line, line
     assert ckpt.read_bytes() == before and not (out / "summary.json").exists()
     (tmp_path / "run.json").rename(out / "run.json")
     # alone, or with flags that agree: continues to the uninterrupted run's summary
-    r = run("--resume", "--out", str(out), "--seed", "1", "--orders", "1")
+    r = run_main("--resume", "--out", out, "--seed", "1", "--orders", "1")
     assert r.returncode == 0, r.stderr
     resumed, uninterrupted = (json.loads((d / "summary.json").read_text()) for d in (out, whole))
     resumed.pop("commit"), uninterrupted.pop("commit")   # other work may be committed between the two runs
@@ -86,8 +89,8 @@ def test_leftover_temp_checkpoint_does_not_block_a_fresh_run_or_resume(tmp_path)
     (out / "checkpoints" / "latest.pt.k3j2x.tmp").write_bytes(b"half a checkpoint")
     (out / "config.json").write_text("{}\n")
     # a resume says there is no checkpoint, in one line, and leaves the leftovers
-    assert "no checkpoint" in one_line(run("--resume", "--out", str(out), "--objects", str(objects), timeout=120))
-    r = run("--objects", str(objects), "--orders", "1", "--out", str(out))
+    assert "no checkpoint" in one_line(run_main("--resume", "--out", out, "--objects", str(objects)))
+    r = run_main("--objects", objects, "--orders", "1", "--out", out)
     assert r.returncode == 0, r.stderr
     assert (out / "summary.json").is_file() and not (out / "checkpoints" / "latest.pt.k3j2x.tmp").exists()
 

@@ -11,6 +11,8 @@ from pathlib import Path
 import pytest
 import torch
 
+from in_process import run_main, wait_until_unlocked
+
 ROOT = Path(__file__).resolve().parents[1]
 PAPER = {"train": [
     {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420},
@@ -37,8 +39,7 @@ def paper_file(tmp_path_factory):
 @pytest.fixture(scope="module")
 def paper_run(paper_file, tmp_path_factory):
     out = tmp_path_factory.mktemp("runs") / "paper"
-    r = subprocess.run(runner("--objects", str(paper_file), "--orders", "listed", "--out", str(out)),
-                       capture_output=True, text=True, timeout=300)
+    r = run_main("--objects", paper_file, "--orders", "listed", "--out", out)
     assert r.returncode == 0, r.stderr
     return out, json.loads((out / "summary.json").read_text()), r.stdout
 
@@ -145,7 +146,7 @@ def test_killed_run_resumes_to_the_same_summary(paper_file, tmp_path):
     # per-episode physics: every episode simulates a drop (~1 s), so the kill lands between episodes
     args = ["--objects", str(paper_file), "--orders", "listed", "--physics", "per-episode"]
     whole = tmp_path / "whole"
-    r = subprocess.run(runner(*args, "--out", str(whole)), capture_output=True, text=True, timeout=300)
+    r = run_main(*args, "--out", whole)   # the uninterrupted run in this process: SIGKILL's is the next one
     assert r.returncode == 0, r.stderr
     out = tmp_path / "killed"
     proc = subprocess.Popen(runner(*args, "--out", str(out)), stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
@@ -158,18 +159,17 @@ def test_killed_run_resumes_to_the_same_summary(paper_file, tmp_path):
     proc.send_signal(signal.SIGKILL)
     proc.wait()
     assert not (out / "summary.json").exists(), "the run finished before it could be killed"
+    wait_until_unlocked(out)   # its workers' exit, before a resume in this process
     assert 1 <= torch.load(ckpt, weights_only=True)["experiment"]["t"] < 3
-    r = subprocess.run(runner(*args, "--out", str(out), "--resume"), capture_output=True, text=True, timeout=300)
+    r = run_main(*args, "--out", out, "--resume")
     assert r.returncode == 0, r.stderr
     assert (out / "summary.json").read_text() == (whole / "summary.json").read_text()
     # resuming with other settings is refused, and leaves the finished run as it was
     before = (out / "summary.json").read_text()
-    r = subprocess.run(runner(*args, "--out", str(out), "--resume", "--seed", "5"), capture_output=True, text=True,
-                       timeout=60)
+    r = run_main(*args, "--out", out, "--resume", "--seed", "5")
     assert r.returncode == 2 and "seed" in r.stderr and (out / "summary.json").read_text() == before
     for other, word in ((["--model", "extended"], "model"), (["--ablate", "rules"], "ablate")):
-        r = subprocess.run(runner(*args, "--out", str(out), "--resume", *other), capture_output=True, text=True,
-                           timeout=60)
+        r = run_main(*args, "--out", out, "--resume", *other)
         assert r.returncode == 2 and word in r.stderr and (out / "summary.json").read_text() == before
 
 
@@ -189,8 +189,7 @@ def test_shipped_default_checkpoint_predicts_as_the_readme_says():
 
 def test_more_orders_than_full_records_run_as_a_population(paper_file, tmp_path):
     out = tmp_path / "pop"
-    r = subprocess.run(runner("--objects", str(paper_file), "--orders", "70", "--out", str(out)),
-                       capture_output=True, text=True, timeout=300)
+    r = run_main("--objects", paper_file, "--orders", "70", "--out", out)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     from train.learning.experiment import draw_orders
@@ -218,8 +217,7 @@ def test_more_orders_than_full_records_run_as_a_population(paper_file, tmp_path)
 
 def test_per_episode_physics_for_a_population_is_refused_before_anything_is_written(paper_file, tmp_path):
     out = tmp_path / "refused"
-    r = subprocess.run(runner("--objects", str(paper_file), "--orders", "70", "--physics", "per-episode",
-                              "--out", str(out)), capture_output=True, text=True, timeout=60)
+    r = run_main("--objects", paper_file, "--orders", "70", "--physics", "per-episode", "--out", out)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "per-episode" in r.stderr
     assert not out.exists()
 

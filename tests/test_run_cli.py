@@ -11,11 +11,15 @@ from pathlib import Path
 
 import pytest
 
+from in_process import run_main
+
 ROOT = Path(__file__).resolve().parents[1]
 GOOD = {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420}
 
 
 def run(*args, cwd=None):
+    """The script in its own process: for what only a process shows (--help's exit, a hang under a timeout, a
+    display); the refusals call its main() in this process (run_main), the same code without the interpreter."""
     return subprocess.run([sys.executable, str(ROOT / "train" / "run.py"), *args], capture_output=True, text=True,
                           cwd=cwd, timeout=120)
 
@@ -24,7 +28,7 @@ def refused(tmp_path, objects_text, *words):
     f = tmp_path / "objects.json"
     f.write_text(objects_text)
     out = tmp_path / "out"
-    r = run("--objects", str(f), "--out", str(out))
+    r = run_main("--objects", str(f), "--out", str(out))
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2, r.stderr
     assert len(lines) == 1, r.stderr
@@ -69,7 +73,7 @@ def test_water_deeper_than_jar_is_refused(tmp_path):
 
 def test_bad_flags_are_refused(tmp_path):
     for args in (["--orders", "zero"], ["--orders", "0"], ["--seed", "-1"], ["--resume"], ["--bogus"]):
-        r = run(*args, "--out", str(tmp_path / "o"))
+        r = run_main(*args, "--out", str(tmp_path / "o"))
         assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1, (args, r.stderr)
         assert not (tmp_path / "o").exists()
 
@@ -80,7 +84,7 @@ def test_bad_flags_are_refused(tmp_path):
     (["--model", "extended", "--ablate", "memory"], ["--ablate memory", "extended", "prior"]),
 ])
 def test_a_model_or_ablation_it_does_not_have_is_refused(tmp_path, args, words):
-    r = run(*args, "--out", str(tmp_path / "o"))
+    r = run_main(*args, "--out", str(tmp_path / "o"))
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert all(w in lines[0] for w in words), lines[0]
@@ -88,12 +92,12 @@ def test_a_model_or_ablation_it_does_not_have_is_refused(tmp_path, args, words):
 
 
 def test_resume_without_checkpoint_and_occupied_out_are_refused(tmp_path):
-    r = run("--out", str(tmp_path / "none"), "--resume")
+    r = run_main("--out", str(tmp_path / "none"), "--resume")
     assert r.returncode == 2 and "no checkpoint" in r.stderr
     occupied = tmp_path / "occupied"
     occupied.mkdir()
     (occupied / "summary.json").write_text("{}")
-    r = run("--out", str(occupied))
+    r = run_main("--out", str(occupied))
     assert r.returncode == 2 and "already holds" in r.stderr
     assert (occupied / "summary.json").read_text() == "{}"  # an earlier run is never damaged
 
@@ -166,7 +170,7 @@ def test_a_64_character_name_is_accepted():
     (["--seed", "9" * 5000], "--seed"),
 ])
 def test_out_of_range_flags_are_refused(tmp_path, args, words):
-    r = run(*args, "--out", str(tmp_path / "o"))
+    r = run_main(*args, "--out", str(tmp_path / "o"))
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and words in lines[0], r.stderr
     assert r.stdout == "" and not (tmp_path / "o").exists()
@@ -176,7 +180,7 @@ def test_all_orders_of_too_many_objects_are_refused(tmp_path):
     many = [obj(name=f"o{i}") for i in range(10)]   # 10! = 3,628,800 orders
     f = tmp_path / "many.json"
     f.write_text(json.dumps({"train": many}))
-    r = run("--objects", str(f), "--orders", "all", "--out", str(tmp_path / "o"))
+    r = run_main("--objects", str(f), "--orders", "all", "--out", str(tmp_path / "o"))
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "10!" in lines[0] and "--orders N" in lines[0], r.stderr
     assert not (tmp_path / "o").exists()
@@ -189,7 +193,7 @@ def test_out_that_cannot_be_a_directory_is_refused(tmp_path):
     (tmp_path / "dangling").symlink_to(tmp_path / "nowhere")
     for out, words in ((tmp_path / "afile", "not a directory"), (tmp_path / "afile" / "sub", "not a directory"),
                        (tmp_path / "dangling", "symbolic link"), (tmp_path / "dangling" / "sub", "symbolic link")):
-        r = run("--out", str(out))
+        r = run_main("--out", str(out))
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2 and len(lines) == 1 and words in lines[0], (out, r.stderr)
         assert "Traceback" not in r.stderr and r.stdout == ""
@@ -219,7 +223,7 @@ def test_out_in_use_by_another_run_is_refused_and_left_alone(tmp_path):
         lock.flush()
         fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)
         for args in ([], ["--resume"]):
-            r = run("--out", str(out), *args)
+            r = run_main("--out", str(out), *args)
             lines = r.stderr.strip().splitlines()
             assert r.returncode == 2 and len(lines) == 1 and "in use by another run (pid 4242)" in lines[0], r.stderr
         assert sorted(p.name for p in out.iterdir()) == [".lock"] and (out / ".lock").read_text() == "4242\n"
@@ -263,7 +267,7 @@ def test_everything_before_the_first_line_runs_without_torch(tmp_path):
 
 def config_refused(tmp_path, *args) -> str:
     out = tmp_path / "out"
-    r = run("--orders", "listed", "--out", str(out), *args)
+    r = run_main("--orders", "listed", "--out", str(out), *args)
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and "Traceback" not in r.stderr, r.stderr
     assert not out.exists()   # nothing written
@@ -327,7 +331,7 @@ def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
     out = tmp_path / "out"
     args = ["--objects", str(objects), "--orders", "listed", "--out", str(out), "--config", str(cfg),
             "--set", "rules.uncertain_decay=1.0", "--set", "memory.max_recalls=none", "--model", "paper"]
-    r = run(*args)
+    r = run_main(*args)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     c = summary["config"]
@@ -346,7 +350,7 @@ def test_the_config_round_trips_into_summary_and_resume_must_match_it(tmp_path):
     for other, word in ((["--set", "rules.uncertain_decay=0.9"], "rules.uncertain_decay"),
                         (["--set", "world.mass_noise_g=1"], "world.mass_noise_g"),
                         (["--model", "extended"], "model")):
-        r = run(*args, *other, "--resume")
+        r = run_main(*args, *other, "--resume")
         lines = r.stderr.strip().splitlines()
         assert r.returncode == 2 and len(lines) == 1 and word in lines[0] and "--resume" in lines[0], r.stderr
         assert (out / "summary.json").read_text() == before
@@ -364,7 +368,7 @@ def test_a_lock_that_is_not_a_regular_file_is_refused_without_touching_anything(
         if kind == "link":
             target.write_text("precious\n")
         os.symlink(target, out / ".lock")
-    r = run("--out", str(out))
+    r = run_main("--out", str(out))
     lines = r.stderr.strip().splitlines()
     assert r.returncode == 2 and len(lines) == 1 and ".lock" in lines[0] and "Traceback" not in r.stderr, r.stderr
     assert (target.read_text() == "precious\n") if kind == "link" else not target.exists()

@@ -14,6 +14,8 @@ from pathlib import Path
 
 import pytest
 
+from in_process import run_main
+
 ROOT = Path(__file__).resolve().parents[1]
 RUN = str(ROOT / "train" / "run.py")
 GOOD = {"name": "red_heavy_cylinder", "shape": "cylinder", "color": "red", "dims_cm": [6.36, 11.5], "mass_g": 420}
@@ -66,7 +68,10 @@ def finish(p: subprocess.Popen) -> str:
 
 
 def resumes(cmd: list[str], out: Path, episodes: int) -> None:
-    r = subprocess.run(cmd + ["--resume"], capture_output=True, text=True, timeout=180)
+    """The ended run's `cmd --resume`, its main() in this process (tests/in_process.py): the resume's process is not
+    what these tests are about."""
+    assert cmd[:2] == [sys.executable, RUN]
+    r = run_main(*cmd[2:], "--resume")
     assert r.returncode == 0, r.stderr
     assert len(json.loads((out / "summary.json").read_text())["runs"][0]["episodes"]) == episodes
 
@@ -174,7 +179,7 @@ def test_a_disk_full_under_the_tensorboard_writer_ends_in_one_line(tmp_path):
     assert r.returncode == 1 and len(lines) == 1, r.stderr
     assert f"cannot write {out / 'tb'}" in lines[0] and "No space left on device" in lines[0], r.stderr
     assert "is intact" in lines[0] and "--resume" in lines[0], r.stderr
-    r = subprocess.run([sys.executable, RUN, *args, "--resume"], capture_output=True, text=True, timeout=180)
+    r = run_main(*args, "--resume")
     assert r.returncode == 0, r.stderr
 
 
@@ -262,8 +267,7 @@ def test_the_interrupted_line_says_resume_and_out_alone_suffice_and_they_do(tmp_
     p, err, _ = signalled(tmp_path, signal.SIGTERM, "running:", 0.0, False)
     out = tmp_path / "out"
     assert p.returncode == 143 and err.strip().endswith(f"is intact: continue with --resume --out {out}"), err
-    r = subprocess.run([sys.executable, RUN, "--resume", "--out", str(out)], capture_output=True, text=True,
-                       timeout=180)
+    r = run_main("--resume", "--out", out)
     assert r.returncode == 0 and r.stderr == "", r.stderr
     assert len(json.loads((out / "summary.json").read_text())["runs"][0]["trials"]) == 2
 

@@ -274,7 +274,7 @@ def test_names_do_not_change_what_an_object_in_view_recalls(explored):
     assert torch.equal(plain.recall.strength, named.recall.strength) and torch.equal(plain.expected, named.expected)
 
 
-def test_ask_cli(tmp_path):
+def test_ask_cli(tmp_path, capsys):
     import subprocess
     import sys
     from pathlib import Path
@@ -285,12 +285,17 @@ def test_ask_cli(tmp_path):
     last = r.stdout.strip().splitlines()[-1]
     assert last.startswith("expected_cm3=") and float(last.split("=")[1]) == pytest.approx(365, rel=0.06)
     assert "colour red" in r.stdout and "shape cylinder" in r.stdout
-    r = subprocess.run(ask + ["light blue cube"], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 0 and r.stdout.strip().splitlines()[-1] == "expected_cm3=unknown"
-    r = subprocess.run(ask + ["purple elephant"], capture_output=True, text=True, timeout=120)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1 and "'elephant'" in r.stderr and not r.stdout
-    r = subprocess.run([*ask[:2], str(tmp_path / "nope.pt"), "red cube"], capture_output=True, text=True, timeout=60)
-    assert r.returncode == 2 and r.stderr.count("\n") == 1
+    # the rest: the script's main() in this process (the same code, without a torch import per call)
+    from train.ask import main as ask_main
+    code = ask_main([ask[2], "light blue cube"])
+    out, err = capsys.readouterr()
+    assert code == 0 and out.strip().splitlines()[-1] == "expected_cm3=unknown"
+    code = ask_main([ask[2], "purple elephant"])
+    out, err = capsys.readouterr()
+    assert code == 2 and err.count("\n") == 1 and "'elephant'" in err and not out
+    code = ask_main([str(tmp_path / "nope.pt"), "red cube"])
+    out, err = capsys.readouterr()
+    assert code == 2 and err.count("\n") == 1
 
 
 # -- the goal in words --------------------------------------------------------------------------------------------
