@@ -42,6 +42,10 @@ import pybullet as p
 from sim.objects import FILL, JarSpec, ObjectsConfig, ObjectSpec
 
 CM, G = 0.01, 0.001  # the objects file's cm and g in pybullet's metres and kilograms
+# a margin far above the rounding of a few float operations on lengths under a metre (~1e-16 m) and far below any
+# length of the model: a bound that holds by this much holds for the computed floats too, so a test it passes
+# leaves a result as it was, bit for bit
+_SURE_M = 1e-9
 
 
 @dataclass
@@ -139,6 +143,10 @@ class _Body:
     cob: np.ndarray | None = None
     R: np.ndarray | None = None  # (3, 3) its orientation at the last step, when in water
     radius: float = 0.0     # m, a sphere's (its wet part is a cap, in closed form), else 0
+    # lower bounds, in any pose, of how far a point reaches above the centre and of a cell's posed height (a unit
+    # vector's components sum to at least 1): they tell that a body is not wholly wet without posing its bounds
+    low_reach: float = 0.0
+    low_layer: float = 0.0
 
 
 class Water:
@@ -173,9 +181,11 @@ class Water:
         bound = reach + float(np.linalg.norm(spacing)) / 2  # the points and their cells
         size = np.asarray(size_xyz, dtype=float)
         round_ = shape == "sphere" and np.ptp(size) <= 1e-12 * size[0]
+        half = np.abs(pts).max(axis=0)
         self.bodies[body_id] = _Body(np.ascontiguousarray(pts.T), w, spacing, float(w.sum()), bound, reach,
-                                     np.abs(pts).max(axis=0), float(w.sum()) ** (1.0 / 3.0),
-                                     info[0], np.asarray(info[2]), radius=float(size[0]) / 2 if round_ else 0.0)
+                                     half, float(w.sum()) ** (1.0 / 3.0),
+                                     info[0], np.asarray(info[2]), radius=float(size[0]) / 2 if round_ else 0.0,
+                                     low_reach=min(float(half.min()), reach), low_layer=float(np.min(spacing)))
 
     def remove_body(self, body_id: int):
         self.bodies.pop(body_id, None)
@@ -219,6 +229,10 @@ class Water:
             pos = np.asarray(pos)
             out.append((bid, b, pos))
             b.R = R = quat_to_matrix(orn)
+            if (b.radius and off_axis + b.radius < radius and pos[2] - b.radius > self.bottom_z
+                    and pos[2] + b.low_reach + 0.5 * b.low_layer > self.level - c.shortcut_margin_m + _SURE_M):
+                caps.append((b, pos))   # a whole sphere in the jar, surely not wholly wet: its wet part is a cap
+                continue
             up = np.abs(R[2])
             layer = float(up @ b.spacing)                  # the height of a grid cell as posed
             reach_z = min(float(up @ b.half), b.reach)     # no point lies farther above or below the centre
@@ -233,9 +247,13 @@ class Water:
                 continue
             z = R[2] @ b.points_t + pos[2]
             w = b.weights
-            if walled or floored:
+            if walled and off_axis + self._across(R, b) + _SURE_M < radius:
+                walled = False   # the bounding sphere reaches the wall, but no point does: each is inside (True)
+            if walled:
                 x, y = R[0] @ b.points_t + (pos[0] - cx), R[1] @ b.points_t + (pos[1] - cy)
                 w = w * ((x * x + y * y < radius ** 2) & (z > self.bottom_z))
+            elif floored:   # the same product: a mask that is True for every point is left out of it
+                w = w * (z > self.bottom_z)
             cut.append((b, pos, z, w, layer))
         base = self.bottom_z + (self.water_volume + wet_volume) / self.area
         if not cut and not caps:
@@ -263,11 +281,20 @@ class Water:
         for (b, pos, _, w, _), (w_near, z_near, layer, _, wet, near) in zip(cut, parts):
             u = 0.5 + (L - z_near) / layer
             share = w * wet                       # each point's wet volume
-            share[near] = w_near * np.clip(u, 0.0, 1.0)
+            share[near] = w_near * np.minimum(np.maximum(u, 0.0), 1.0)   # np.clip's arithmetic (see _solve_points)
             b.v_sub = float(share.sum())
             b.waterplane = float(w_near @ ((u > 0) & (u < 1))) / layer  # dV_sub/dL: the area the surface cuts
             b.cob = b.R @ (b.points_t @ share) / b.v_sub + pos if b.v_sub > 0 else None
         return out
+
+    @staticmethod
+    def _across(R: np.ndarray, b: _Body) -> float:
+        """How far any point of `b` posed by R lies from its centre across the vertical, at most: along world x it
+        is at most |R[0]| . half, along y |R[1]| . half, and never farther than the farthest point."""
+        hx, hy, hz = b.half.tolist()
+        (a, b_, c), (d, e, f) = R[0].tolist(), R[1].tolist()
+        return min(math.hypot(abs(a) * hx + abs(b_) * hy + abs(c) * hz, abs(d) * hx + abs(e) * hy + abs(f) * hz),
+                   b.reach)
 
     def _solve(self, base: float, parts: list, bottoms: list, radii: list) -> float:
         """Newton on L = base + V_sub(L) / A (monotone), from the last level. parts: per cut body (weights and
@@ -275,9 +302,40 @@ class Water:
         the spheres taken in closed form (their lowest point and radius)."""
         if not parts and 0 < len(radii) < 8:
             return self._solve_caps(base, bottoms, radii)
-        return self._solve_points(base, parts, np.array(bottoms), np.array(radii))
+        return self._solve_points(base, parts, bottoms, radii)
 
-    def _solve_points(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
+    def _solve_points(self, base: float, parts: list, bottoms: list, radii: list) -> float:
+        """The points' part in numpy; the spheres' caps (fewer than 8) in Python floats as in `_solve_caps` (the
+        same bits as numpy's), and the points' clip as maximum then minimum, which is np.clip's arithmetic (u is
+        never -0.0: it is 0.5 plus a number) without its Python wrapper."""
+        c = self.config
+        if len(radii) >= 8:
+            return self._solve_points_numpy(base, parts, np.array(bottoms), np.array(radii))
+        if not parts:
+            w = z = layer = np.zeros(0)
+        elif len(parts) == 1:
+            w, z, layer = parts[0][:3]
+        else:
+            w, z = np.concatenate([x[0] for x in parts]), np.concatenate([x[1] for x in parts])
+            layer = np.concatenate([np.full(len(x[1]), x[2]) for x in parts])
+        fixed = base + sum(x[3] for x in parts) / self.area
+        w_per_layer = w / layer
+        maximum, minimum, area, L = np.maximum, np.minimum, self.area, self.level
+        for _ in range(c.level_max_iterations):
+            u = 0.5 + (L - z) / layer
+            cap = face = 0.0   # numpy's sum of no caps; of one, that cap; of a few, left to right
+            for k, (bottom, r) in enumerate(zip(bottoms, radii)):
+                v, a = _cap(_clip(L - bottom, 0.0, 2.0 * r), r)
+                cap, face = (v, a) if k == 0 else (cap + v, face + a)
+            f = L - fixed - (float(w @ minimum(maximum(u, 0.0), 1.0)) + cap) / area
+            slope = 1.0 - (float(w_per_layer @ ((u > 0) & (u < 1))) + face) / area
+            step = f / slope
+            L -= step
+            if abs(step) < c.level_tolerance_m:
+                break
+        return L
+
+    def _solve_points_numpy(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
         c = self.config
         if not parts:
             w = z = layer = np.zeros(0)
