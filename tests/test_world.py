@@ -12,6 +12,7 @@ import pytest
 from sim.episode import EpisodeOutcome, FrameRecorder, _rests_on_bottom, _take, save_frames_png
 from sim.objects import (DEFAULT_OBJECTS_FILE, JarSpec, ObjectsConfig, ObjectSpec, load_objects, min_mass_g_for,
                          parse_objects)
+from sim.perception import CameraConfig
 from sim.water import CM, TankConfig, WaterConfig
 from sim.world import World, WorldConfig
 
@@ -124,6 +125,33 @@ def test_a_drop_measures_an_object_as_an_inspection_does_bit_for_bit(world, heav
     # by a drop, and an object only the trials use too): the same measurement, every float equal
     first, _ = heavy
     assert _plain(world.inspect("red_heavy_cylinder")) == _plain(first.measurement)
+
+
+def test_the_cameras_skip_the_table_and_floor_and_measure_the_same_bit_for_bit(world, monkeypatch):
+    # inside robot_unseen the table, its legs and the floor are hidden too (every eye is above the table top, and
+    # so is the object: they never stand between), and shown again after; the percept is the one they were drawn in
+    cl = world.client
+    alphas = lambda: [p.getVisualShapeData(b, physicsClientId=cl)[0][7][3] for b, _ in world._underneath]
+    assert len(world._underneath) == 6 and world.eyes_above_table() and alphas() == [1.0] * 6
+    with world.robot_unseen():
+        assert alphas() == [0.0] * 6
+    assert alphas() == [1.0] * 6
+    for name in ("yellow_light_sphere", "green_light_box"):
+        world.reset(name)
+        body = world.place_on_stand(name)
+        world.settle()
+        fast = world.look(body)
+        with monkeypatch.context() as m:
+            m.setattr(world, "eyes_above_table", lambda: False)
+            with world.robot_unseen():
+                assert alphas() == [1.0] * 6
+            drawn = world.look(body)
+        assert _plain(fast.measurement) == _plain(drawn.measurement)
+        assert fast.top_centre.tolist() == drawn.top_centre.tolist() and fast.height_m == drawn.height_m
+    # a side glance from below the table top (40 degrees down: its eye 23 cm below it) would look through the table
+    low = WorldConfig(camera=CameraConfig(side_elevation_deg=-40.0))
+    monkeypatch.setattr(world, "config", low)
+    assert not world.eyes_above_table()
 
 
 def test_an_objects_measurement_depends_on_the_seed_and_the_object_only():
