@@ -160,6 +160,7 @@ class Water:
         self.timestep = float(timestep)
         self.config = config or WaterConfig()
         self.center_xy = np.asarray(center_xy, dtype=float)
+        self._column = (float(self.center_xy[0]), float(self.center_xy[1]), float(inner_radius))  # Python floats
         self.bottom_z = float(bottom_z)
         self.radius = float(inner_radius)
         self.area = math.pi * inner_radius ** 2
@@ -203,8 +204,7 @@ class Water:
     def column(self, pos) -> tuple[float, float, float]:
         """The cylinder of water a body at `pos` is in: (axis x, axis y, inner radius). One jar here; tubes joined by
         a hidden channel (sim/tubes.py) answer with the tube the body is in, sharing one level and one area."""
-        cx, cy = self.center_xy
-        return cx, cy, self.radius
+        return self._column
 
     def update_level(self) -> list:
         """Solve the level for the bodies' current poses; returns [(id, body, position)] of the bodies in water.
@@ -226,12 +226,12 @@ class Water:
                     or pos[2] + b.bound <= self.bottom_z):
                 b.v_sub, b.waterplane, b.cob, b.R = 0.0, 0.0, None, None
                 continue
-            pos = np.asarray(pos)
+            xyz, pos = pos, np.asarray(pos)
             out.append((bid, b, pos))
             b.R = R = quat_to_matrix(orn)
-            if (b.radius and off_axis + b.radius < radius and pos[2] - b.radius > self.bottom_z
-                    and pos[2] + b.low_reach + 0.5 * b.low_layer > self.level - c.shortcut_margin_m + _SURE_M):
-                caps.append((b, pos))   # a whole sphere in the jar, surely not wholly wet: its wet part is a cap
+            if (b.radius and off_axis + b.radius < radius and xyz[2] - b.radius > self.bottom_z
+                    and xyz[2] + b.low_reach + 0.5 * b.low_layer > self.level - c.shortcut_margin_m + _SURE_M):
+                caps.append((b, xyz))   # a whole sphere in the jar, surely not wholly wet: its wet part is a cap
                 continue
             up = np.abs(R[2])
             layer = float(up @ b.spacing)                  # the height of a grid cell as posed
@@ -243,7 +243,7 @@ class Water:
                 wet_volume += b.volume
                 continue
             if b.radius and off_axis + b.radius < radius and pos[2] - b.radius > self.bottom_z:
-                caps.append((b, pos))   # a whole sphere in the jar: its wet part is a cap
+                caps.append((b, xyz))   # a whole sphere in the jar: its wet part is a cap
                 continue
             z = R[2] @ b.points_t + pos[2]
             w = b.weights
@@ -277,7 +277,9 @@ class Water:
             h = _clip(L - bottom, 0.0, 2.0 * r)
             b.v_sub, b.waterplane = _cap(h, r)
             # the cap's centroid lies 3 (2r - h)^2 / (4 (3r - h)) below the centre (r for h -> 0, 0 for h = 2r)
-            b.cob = pos - [0.0, 0.0, 3.0 * (2.0 * r - h) ** 2 / (4.0 * (3.0 * r - h))] if h > 0 else None
+            # (pos - [0, 0, that] as numpy subtracts, in Python floats: x - 0.0 is x, -0.0 too)
+            b.cob = np.array((pos[0] - 0.0, pos[1] - 0.0, pos[2] - 3.0 * (2.0 * r - h) ** 2 / (4.0 * (3.0 * r - h)))) \
+                if h > 0 else None
         for (b, pos, _, w, _), (w_near, z_near, layer, _, wet, near) in zip(cut, parts):
             u = 0.5 + (L - z_near) / layer
             share = w * wet                       # each point's wet volume
