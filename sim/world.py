@@ -104,6 +104,9 @@ x.XOpenDisplay.restype = ctypes.c_void_p
 x.XOpenDisplay.argtypes = [ctypes.c_char_p]
 sys.exit(0 if x.XOpenDisplay(None) else 4)
 """
+# palm_ik's answers kept (oldest out first): a drop asks ~7 questions; 256 hold every question of many drops in
+# a few MB, so the questions that recur (the goal check from the ball at rest) are found
+IK_MEMORY = 256
 X_PROBE_TIMEOUT_S = 10.0   # a local X server answers in milliseconds; a remote one that never answers must not hang
 
 
@@ -154,6 +157,7 @@ class World:
             raise RuntimeError(why)
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.kin = ArmKinematics(config=c.ik)
+        self._ik_memory = {}   # palm_ik's answers by question
         self.steps = 0
         self.recorder = None
         self._build()
@@ -346,8 +350,16 @@ class World:
         tw = torch.as_tensor(np.asarray(targets_world, dtype=float).reshape(-1, 3), dtype=torch.float64)
         tr, _ = world_to_root(tw, None, self.base_pos, self.base_quat)
         q0 = self.robot.arm_q() if q0 is None else q0
-        res = self.kin.ik(tr, target_normal=_palm_down_root().expand(len(tr), 3), q0=q0)
-        return res.q, res.success
+        # IK is a function of its inputs alone (its restarts seeded afresh each call): a question asked before, bit
+        # for bit (the goal check from the same ball, an object's reach asked again), is answered from memory
+        key = (tuple(tr.shape), tr.numpy().tobytes(), torch.as_tensor(q0, dtype=torch.float64).numpy().tobytes())
+        if key not in self._ik_memory:
+            if len(self._ik_memory) >= IK_MEMORY:
+                del self._ik_memory[next(iter(self._ik_memory))]   # the oldest
+            res = self.kin.ik(tr, target_normal=_palm_down_root().expand(len(tr), 3), q0=q0)
+            self._ik_memory[key] = (res.q, res.success)
+        q, ok = self._ik_memory[key]
+        return q.clone(), ok.clone()
 
     def drive_to(self, q, tol: float, timeout_s: float) -> bool:
         """Motors towards q (POSITION_CONTROL) and step until every joint is within tol, or the timeout."""
