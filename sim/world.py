@@ -368,7 +368,7 @@ class World:
         for _ in range(int(round(timeout_s / self.config.tank.timestep_s))):
             self.step()
             states = p.getJointStates(rob.body, rob.arm_joints, physicsClientId=self.client)
-            if max(abs(s[0] - t) for s, t in zip(states, target)) < tol:   # in floats: no tensor per step
+            if max([abs(s[0] - t) for s, t in zip(states, target)]) < tol:   # in floats: no tensor per step
                 return True
         return False
 
