@@ -39,7 +39,6 @@ The agent never sees the file's labels: nothing here reads an ObjectSpec.
 from __future__ import annotations
 
 import math
-from contextlib import nullcontext
 from dataclasses import dataclass
 
 import numpy as np
@@ -191,10 +190,8 @@ def _mask(view: View, body: int, what: str, min_pixels: int) -> np.ndarray:
 
 # -- the two views ---------------------------------------------------------------------------------------------------
 
-def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig, unseen=None) -> dict:
-    """The glance from the side: where the object is, how wide and tall, and its width at each height.
-    unseen(eye): a context in which the scene leaves out of the render what cannot stand in front of the object
-    seen from eye (World.behind_object), or None."""
+def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig) -> dict:
+    """The glance from the side: where the object is, how wide and tall, and its width at each height."""
     az, el = math.radians(cam.side_azimuth_deg), math.radians(cam.side_elevation_deg)
     aim = np.array([ws.stand_xy[0], ws.stand_xy[1], ws.stand_top_z + cam.side_aim_cm / 100.0])
     toward = np.array([math.cos(az) * math.cos(el), math.sin(az) * math.cos(el), math.sin(el)])
@@ -204,9 +201,8 @@ def side_view(client: int, body: int, ws: Workspace, cam: CameraConfig, unseen=N
     up = math.cos(roll) * np.array([0.0, 0.0, 1.0]) + math.sin(roll) * right
     for widen in (1.0, 2.0, 4.0):   # a tall box seen edge-on from the side looks narrow: zoom out   # an object too big for the usual field (taller than ~14 cm): look again, wider
         fov = math.degrees(2 * math.atan(widen * cam.side_field_cm / 200.0 / cam.side_distance))
-        eye = aim + cam.side_distance * toward
-        with nullcontext() if unseen is None else unseen(eye):
-            view = take_view(client, eye, aim, up, fov, cam.width, cam.width, cam.near, cam.far)
+        view = take_view(client, aim + cam.side_distance * toward, aim, up, fov, cam.width, cam.width,
+                         cam.near, cam.far)
         try:
             mask = _mask(view, body, "side", cam.min_pixels)
             break
@@ -303,10 +299,9 @@ def outline_rect(xy: np.ndarray, px: float) -> tuple[np.ndarray, np.ndarray]:
     return (eu - e_u) / 2 * u + (ev - e_v) / 2 * v, np.sort([eu + e_u, ev + e_v])[::-1]
 
 
-def look(client: int, body: int, ws: Workspace, camera: CameraConfig = CameraConfig(), unseen=None) -> Percept:
-    """Look at the object standing on the stand: colour, extents, fill, and where its top is. unseen: as
-    `side_view`'s (the top view is rendered whole: from above, nothing is wholly farther than the object's foot)."""
-    side = side_view(client, body, ws, camera, unseen)
+def look(client: int, body: int, ws: Workspace, camera: CameraConfig = CameraConfig()) -> Percept:
+    """Look at the object standing on the stand: colour, extents, fill, and where its top is."""
+    side = side_view(client, body, ws, camera)
     for widen in (1.0, 2.0, 4.0):   # a tall box seen edge-on from the side looks narrow: zoom out
         top = top_view(client, body, side["centre_xy"], side["top_z"], side["width"], camera, widen)
         try:

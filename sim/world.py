@@ -107,10 +107,6 @@ sys.exit(0 if x.XOpenDisplay(None) else 4)
 # palm_ik's answers kept (oldest out first): a drop asks ~7 questions; 256 hold every question of many drops in
 # a few MB, so the questions that recur (the goal check from the ball at rest) are found
 IK_MEMORY = 256
-# a body left out of a render as lying behind the object is farther than it by this at least: ~400x the depth
-# buffer's resolution at the far plane (float32, near 5 cm, far 1.5 m: ~3 um), and more than a mesh stands proud
-# of the shape it draws (pybullet's cylinder visual: ~1 mm)
-BEHIND_MARGIN_M = 0.001
 X_PROBE_TIMEOUT_S = 10.0   # a local X server answers in milliseconds; a remote one that never answers must not hang
 
 
@@ -499,46 +495,11 @@ class World:
             for b, rgba in under:
                 p.changeVisualShape(b, -1, rgbaColor=list(rgba), physicsClientId=cl)
 
-    @contextmanager
-    def behind_object(self, body: int, eye):
-        """The jar, its water and the ball left out of a render from `eye` inside the block, each only when it lies
-        wholly farther from the eye than every point of `body` (its bounding box), by more than `BEHIND_MARGIN_M`:
-        along any ray from the eye it is then behind the object, so no pixel of the object changes (the side
-        glance at the stand sees the jar behind it, which cost ~12 of the glance's ~33 ms). Each is bounded from
-        the scene's geometry: the jar by its outer wall from the table to the rim, its water's look (as last
-        placed) by the same wall over its height, the ball by its sphere."""
-        cl, tank = self.client, self.tank
-        e = np.asarray(eye, dtype=float)
-        lo, hi = (np.asarray(x, dtype=float) for x in p.getAABB(body, physicsClientId=cl))
-        far = float(np.linalg.norm(np.maximum(np.abs(e - lo), np.abs(e - hi))))   # its farthest corner
-        outer = tank.jar.inner_diameter_cm / 2 * CM + tank.config.wall_thickness_cm * CM
-        axis, half_h = tank.center[:2], tank.jar.height_cm * CM / 2
-        water_z = p.getBasePositionAndOrientation(tank.water_visual, physicsClientId=cl)[0][2]
-        ball = np.asarray(p.getBasePositionAndOrientation(tank.ball, physicsClientId=cl)[0], dtype=float)
-        r_ball = tank.config.ball_diameter_cm / 2 * CM
-        boxes = ((tank.jar_body, [*(axis - outer), tank.center[2]], [*(axis + outer), tank.rim_z]),
-                 (tank.water_visual, [*(axis - outer), water_z - half_h - BEHIND_MARGIN_M],
-                  [*(axis + outer), water_z + half_h + BEHIND_MARGIN_M]),
-                 (tank.ball, ball - r_ball, ball + r_ball))
-        hidden = []
-        for b, box_lo, box_hi in boxes:
-            near = float(np.linalg.norm(e - np.clip(e, box_lo, box_hi)))   # the box's nearest point to the eye
-            if near > far + BEHIND_MARGIN_M:
-                hidden.append((b, p.getVisualShapeData(b, physicsClientId=cl)[0][7]))
-        for b, rgba in hidden:
-            p.changeVisualShape(b, -1, rgbaColor=[*rgba[:3], 0.0], physicsClientId=cl)
-        try:
-            yield
-        finally:
-            for b, rgba in hidden:
-                p.changeVisualShape(b, -1, rgbaColor=list(rgba), physicsClientId=cl)
-
     def look(self, body: int) -> Percept:
         """Look at the object on the stand (two camera images, sim/perception.py): its measurement without the
         mass, and where its top is, which is where the hand goes to take it."""
         with self.robot_unseen():
-            return look(self.client, body, self.workspace, self.config.camera,
-                        lambda eye: self.behind_object(body, eye))
+            return look(self.client, body, self.workspace, self.config.camera)
 
     def perceive(self, body: int, mass_g: float) -> dict:
         return {**self.look(body).measurement, "mass_g": float(mass_g)}
