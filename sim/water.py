@@ -36,6 +36,7 @@ Units: metres, kilograms, seconds (pybullet's).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -150,6 +151,7 @@ class _Body:
     # vector's components sum to at least 1): they tell that a body is not wholly wet without posing its bounds
     low_reach: float = 0.0
     low_layer: float = 0.0
+    corners: np.ndarray | None = None   # (3, 8) the corners of the box of `half` extents, body frame
 
 
 class Water:
@@ -189,7 +191,8 @@ class Water:
         self.bodies[body_id] = _Body(np.ascontiguousarray(pts.T), w, spacing, float(w.sum()), bound, reach,
                                      half, float(w.sum()) ** (1.0 / 3.0),
                                      info[0], np.asarray(info[2]), radius=float(size[0]) / 2 if round_ else 0.0,
-                                     low_reach=min(float(half.min()), reach), low_layer=float(np.min(spacing)))
+                                     low_reach=min(float(half.min()), reach), low_layer=float(np.min(spacing)),
+                                     corners=(np.array(list(itertools.product((-1.0, 1.0), repeat=3))) * half).T)
 
     def remove_body(self, body_id: int):
         self.bodies.pop(body_id, None)
@@ -294,12 +297,11 @@ class Water:
 
     @staticmethod
     def _across(R: np.ndarray, b: _Body) -> float:
-        """How far any point of `b` posed by R lies from its centre across the vertical, at most: along world x it
-        is at most |R[0]| . half, along y |R[1]| . half, and never farther than the farthest point."""
-        hx, hy, hz = b.half.tolist()
-        (a, b_, c), (d, e, f) = R[0].tolist(), R[1].tolist()
-        return min(math.hypot(abs(a) * hx + abs(b_) * hy + abs(c) * hz, abs(d) * hx + abs(e) * hy + abs(f) * hz),
-                   b.reach)
+        """How far any point of `b` posed by R lies from its centre across the vertical, at most: every point lies in
+        the box of its `half` extents, whose farthest point across the vertical is a corner (the distance is convex),
+        and never farther than the farthest point."""
+        h = R[:2] @ b.corners
+        return min(float(np.sqrt(h[0] * h[0] + h[1] * h[1]).max()), b.reach)
 
     def _solve(self, base: float, parts: list, bottoms: list, radii: list) -> float:
         """Newton on L = base + V_sub(L) / A (monotone), from the last level. parts: per cut body (weights and
