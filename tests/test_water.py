@@ -157,6 +157,25 @@ def test_a_sphere_half_under_holds_half_its_volume(client):
     assert water.submerged_volume(ball) / CM ** 3 == pytest.approx(4 / 3 * math.pi * r ** 3 - 28 * math.pi / 3,
                                                                    abs=8 * math.pi * 0.19)
 
+def test_a_sphere_wholly_under_is_wet_all_through_and_one_at_the_surface_a_cap(client):
+    # the floating sphere's step takes the cap without posing its bounds, but only where the wholly-wet test cannot
+    # pass: a sphere deep under water still counts its points' volume (the shortcut), which differs from the
+    # closed-form whole sphere in the last bits; one at the surface gets the cap
+    from sim.water import _cap
+    A = 36 * math.pi
+    water = Water(client, [0.0, 0.0], 0.0, 0.06, A * 10.0 * CM ** 3, 1 / 240)   # 10 cm of water alone
+    ball = make_body(client, "sphere", [0.06] * 3, 0.1, (0, 1, 0), [0.0, 0.0, 0.04], 0.5)
+    water.add_body(ball, "sphere", [0.06] * 3)
+    b = water.bodies[ball]
+    assert b.volume != _cap(0.06, 0.03)[0]
+    water.update_level()                             # its top 3 cm under the surface
+    assert water.submerged_volume(ball) == b.volume and b.cob.tolist() == [0.0, 0.0, 0.04]
+    p.resetBasePositionAndOrientation(ball, [0.0, 0.0, 0.105], [0, 0, 0, 1], physicsClientId=client)
+    water.update_level()                             # cut by the surface
+    h = water.level - (0.105 - 0.03)
+    assert 0 < h < 0.06 and water.submerged_volume(ball) == _cap(h, 0.03)[0]
+
+
 def test_the_spheres_level_in_python_floats_is_numpys_bit_for_bit():
     # the level with spheres alone is solved in Python floats (the ball floats there at every step): it must be the
     # numpy solve's level exactly. Spheres dry, cut and under, 1 to 3 of them (3: a short sum's order shows), from
