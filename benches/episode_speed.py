@@ -63,6 +63,7 @@ def episode() -> float:
     finally:
         Water.step = step
     steps = world.steps - steps0
+    world._ik_memory.clear()   # asked afresh: palm_ik remembers the episode's own last goal check
     t0 = time.perf_counter()
     world.goal_reachable()
     reach = time.perf_counter() - t0

@@ -7,8 +7,8 @@ Nothing here reads the engine's answers about the object (no AABB, collision sha
 images (colour, depth buffer, segmentation mask) and what the robot knows of its own workspace, where its stand is
 and how high its top is (`Workspace`). The segmentation mask stands in for figure-ground segmentation.
 
-Two views (`CameraConfig`), each one TinyRenderer image (~20 ms each; the world hides the robot from them,
-`World.robot_unseen`, whose meshes would triple that):
+Two views (`CameraConfig`), each one TinyRenderer image (~15 ms each; the world hides the robot from them,
+`World.robot_unseen`, whose meshes would triple that, and the table and the floor, whose area doubled it):
 1. a side view from the robot's right (-y), 10 degrees above the horizontal, aimed at the stand (rolled 15 degrees
    about its axis, so upright edges cross the pixel grid): a fixed glance that finds the object (where it is, how
    wide, how tall) and gives its side profile;

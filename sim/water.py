@@ -25,7 +25,10 @@ Cost: measured against evaluating every point every step (the previous version, 
 `python benches/episode_speed.py` prints the cost per step of a drop episode beside pybullet's own step. With
 spheres alone in the water (the ball, before and after a drop) the level is solved in Python floats, the same
 operations as numpy's in the same order: the ball's water step went from ~34 to ~16 us (2026-12-02, the outcomes
-of the default set's 13 simulations and a generated set's 9 the same bit for bit).
+of the default set's 13 simulations and a generated set's 9 the same bit for bit). A body whose bounding sphere
+reaches the wall but whose posed points cannot (a bound from its pose) skips the wall's mask, and a floating sphere
+skips the bounds of the wholly-wet test it cannot pass: the ball's step ~25 -> ~18 us (2026-12-07, every outcome
+and pose of the default set and two generated sets the same bit for bit).
 
 The robot's links neither float nor displace water: only registered bodies do (the dropped object and the ball).
 Units: metres, kilograms, seconds (pybullet's).
@@ -33,6 +36,7 @@ Units: metres, kilograms, seconds (pybullet's).
 
 from __future__ import annotations
 
+import itertools
 import math
 from dataclasses import dataclass, field
 
@@ -42,6 +46,10 @@ import pybullet as p
 from sim.objects import FILL, JarSpec, ObjectsConfig, ObjectSpec
 
 CM, G = 0.01, 0.001  # the objects file's cm and g in pybullet's metres and kilograms
+# a margin far above the rounding of a few float operations on lengths under a metre (~1e-16 m) and far below any
+# length of the model: a bound that holds by this much holds for the computed floats too, so a test it passes
+# leaves a result as it was, bit for bit
+_SURE_M = 1e-9
 
 
 @dataclass
@@ -139,6 +147,11 @@ class _Body:
     cob: np.ndarray | None = None
     R: np.ndarray | None = None  # (3, 3) its orientation at the last step, when in water
     radius: float = 0.0     # m, a sphere's (its wet part is a cap, in closed form), else 0
+    # lower bounds, in any pose, of how far a point reaches above the centre and of a cell's posed height (a unit
+    # vector's components sum to at least 1): they tell that a body is not wholly wet without posing its bounds
+    low_reach: float = 0.0
+    low_layer: float = 0.0
+    corners: np.ndarray | None = None   # (3, 8) the corners of the box of `half` extents, body frame
 
 
 class Water:
@@ -152,6 +165,7 @@ class Water:
         self.timestep = float(timestep)
         self.config = config or WaterConfig()
         self.center_xy = np.asarray(center_xy, dtype=float)
+        self._column = (float(self.center_xy[0]), float(self.center_xy[1]), float(inner_radius))  # Python floats
         self.bottom_z = float(bottom_z)
         self.radius = float(inner_radius)
         self.area = math.pi * inner_radius ** 2
@@ -173,9 +187,12 @@ class Water:
         bound = reach + float(np.linalg.norm(spacing)) / 2  # the points and their cells
         size = np.asarray(size_xyz, dtype=float)
         round_ = shape == "sphere" and np.ptp(size) <= 1e-12 * size[0]
+        half = np.abs(pts).max(axis=0)
         self.bodies[body_id] = _Body(np.ascontiguousarray(pts.T), w, spacing, float(w.sum()), bound, reach,
-                                     np.abs(pts).max(axis=0), float(w.sum()) ** (1.0 / 3.0),
-                                     info[0], np.asarray(info[2]), radius=float(size[0]) / 2 if round_ else 0.0)
+                                     half, float(w.sum()) ** (1.0 / 3.0),
+                                     info[0], np.asarray(info[2]), radius=float(size[0]) / 2 if round_ else 0.0,
+                                     low_reach=min(float(half.min()), reach), low_layer=float(np.min(spacing)),
+                                     corners=(np.array(list(itertools.product((-1.0, 1.0), repeat=3))) * half).T)
 
     def remove_body(self, body_id: int):
         self.bodies.pop(body_id, None)
@@ -193,8 +210,7 @@ class Water:
     def column(self, pos) -> tuple[float, float, float]:
         """The cylinder of water a body at `pos` is in: (axis x, axis y, inner radius). One jar here; tubes joined by
         a hidden channel (sim/tubes.py) answer with the tube the body is in, sharing one level and one area."""
-        cx, cy = self.center_xy
-        return cx, cy, self.radius
+        return self._column
 
     def update_level(self) -> list:
         """Solve the level for the bodies' current poses; returns [(id, body, position)] of the bodies in water.
@@ -216,9 +232,13 @@ class Water:
                     or pos[2] + b.bound <= self.bottom_z):
                 b.v_sub, b.waterplane, b.cob, b.R = 0.0, 0.0, None, None
                 continue
-            pos = np.asarray(pos)
+            xyz, pos = pos, np.asarray(pos)
             out.append((bid, b, pos))
             b.R = R = quat_to_matrix(orn)
+            if (b.radius and off_axis + b.radius < radius and xyz[2] - b.radius > self.bottom_z
+                    and xyz[2] + b.low_reach + 0.5 * b.low_layer > self.level - c.shortcut_margin_m + _SURE_M):
+                caps.append((b, xyz))   # a whole sphere in the jar, surely not wholly wet: its wet part is a cap
+                continue
             up = np.abs(R[2])
             layer = float(up @ b.spacing)                  # the height of a grid cell as posed
             reach_z = min(float(up @ b.half), b.reach)     # no point lies farther above or below the centre
@@ -229,13 +249,17 @@ class Water:
                 wet_volume += b.volume
                 continue
             if b.radius and off_axis + b.radius < radius and pos[2] - b.radius > self.bottom_z:
-                caps.append((b, pos))   # a whole sphere in the jar: its wet part is a cap
+                caps.append((b, xyz))   # a whole sphere in the jar: its wet part is a cap
                 continue
             z = R[2] @ b.points_t + pos[2]
             w = b.weights
-            if walled or floored:
+            if walled and off_axis + self._across(R, b) + _SURE_M < radius:
+                walled = False   # the bounding sphere reaches the wall, but no point does: each is inside (True)
+            if walled:
                 x, y = R[0] @ b.points_t + (pos[0] - cx), R[1] @ b.points_t + (pos[1] - cy)
                 w = w * ((x * x + y * y < radius ** 2) & (z > self.bottom_z))
+            elif floored:   # the same product: a mask that is True for every point is left out of it
+                w = w * (z > self.bottom_z)
             cut.append((b, pos, z, w, layer))
         base = self.bottom_z + (self.water_volume + wet_volume) / self.area
         if not cut and not caps:
@@ -259,15 +283,25 @@ class Water:
             h = _clip(L - bottom, 0.0, 2.0 * r)
             b.v_sub, b.waterplane = _cap(h, r)
             # the cap's centroid lies 3 (2r - h)^2 / (4 (3r - h)) below the centre (r for h -> 0, 0 for h = 2r)
-            b.cob = pos - [0.0, 0.0, 3.0 * (2.0 * r - h) ** 2 / (4.0 * (3.0 * r - h))] if h > 0 else None
+            # (pos - [0, 0, that] as numpy subtracts, in Python floats: x - 0.0 is x, -0.0 too)
+            b.cob = np.array((pos[0] - 0.0, pos[1] - 0.0, pos[2] - 3.0 * (2.0 * r - h) ** 2 / (4.0 * (3.0 * r - h)))) \
+                if h > 0 else None
         for (b, pos, _, w, _), (w_near, z_near, layer, _, wet, near) in zip(cut, parts):
             u = 0.5 + (L - z_near) / layer
             share = w * wet                       # each point's wet volume
-            share[near] = w_near * np.clip(u, 0.0, 1.0)
+            share[near] = w_near * np.minimum(np.maximum(u, 0.0), 1.0)   # np.clip's arithmetic (see _solve_points)
             b.v_sub = float(share.sum())
             b.waterplane = float(w_near @ ((u > 0) & (u < 1))) / layer  # dV_sub/dL: the area the surface cuts
             b.cob = b.R @ (b.points_t @ share) / b.v_sub + pos if b.v_sub > 0 else None
         return out
+
+    @staticmethod
+    def _across(R: np.ndarray, b: _Body) -> float:
+        """How far any point of `b` posed by R lies from its centre across the vertical, at most: every point lies in
+        the box of its `half` extents, whose farthest point across the vertical is a corner (the distance is convex),
+        and never farther than the farthest point."""
+        h = R[:2] @ b.corners
+        return min(float(np.sqrt(h[0] * h[0] + h[1] * h[1]).max()), b.reach)
 
     def _solve(self, base: float, parts: list, bottoms: list, radii: list) -> float:
         """Newton on L = base + V_sub(L) / A (monotone), from the last level. parts: per cut body (weights and
@@ -275,9 +309,40 @@ class Water:
         the spheres taken in closed form (their lowest point and radius)."""
         if not parts and 0 < len(radii) < 8:
             return self._solve_caps(base, bottoms, radii)
-        return self._solve_points(base, parts, np.array(bottoms), np.array(radii))
+        return self._solve_points(base, parts, bottoms, radii)
 
-    def _solve_points(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
+    def _solve_points(self, base: float, parts: list, bottoms: list, radii: list) -> float:
+        """The points' part in numpy; the spheres' caps (fewer than 8) in Python floats as in `_solve_caps` (the
+        same bits as numpy's), and the points' clip as maximum then minimum, which is np.clip's arithmetic (u is
+        never -0.0: it is 0.5 plus a number) without its Python wrapper."""
+        c = self.config
+        if len(radii) >= 8:
+            return self._solve_points_numpy(base, parts, np.array(bottoms), np.array(radii))
+        if not parts:
+            w = z = layer = np.zeros(0)
+        elif len(parts) == 1:
+            w, z, layer = parts[0][:3]
+        else:
+            w, z = np.concatenate([x[0] for x in parts]), np.concatenate([x[1] for x in parts])
+            layer = np.concatenate([np.full(len(x[1]), x[2]) for x in parts])
+        fixed = base + sum(x[3] for x in parts) / self.area
+        w_per_layer = w / layer
+        maximum, minimum, area, L = np.maximum, np.minimum, self.area, self.level
+        for _ in range(c.level_max_iterations):
+            u = 0.5 + (L - z) / layer
+            cap = face = 0.0   # numpy's sum of no caps; of one, that cap; of a few, left to right
+            for k, (bottom, r) in enumerate(zip(bottoms, radii)):
+                v, a = _cap(_clip(L - bottom, 0.0, 2.0 * r), r)
+                cap, face = (v, a) if k == 0 else (cap + v, face + a)
+            f = L - fixed - (float(w @ minimum(maximum(u, 0.0), 1.0)) + cap) / area
+            slope = 1.0 - (float(w_per_layer @ ((u > 0) & (u < 1))) + face) / area
+            step = f / slope
+            L -= step
+            if abs(step) < c.level_tolerance_m:
+                break
+        return L
+
+    def _solve_points_numpy(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
         c = self.config
         if not parts:
             w = z = layer = np.zeros(0)

@@ -21,6 +21,7 @@ smallest default displacement, 14 cm^3) plus optional gaussian noise from the wo
 
 from __future__ import annotations
 
+import math
 import os
 import sys
 import time
@@ -103,6 +104,9 @@ x.XOpenDisplay.restype = ctypes.c_void_p
 x.XOpenDisplay.argtypes = [ctypes.c_char_p]
 sys.exit(0 if x.XOpenDisplay(None) else 4)
 """
+# palm_ik's answers kept (oldest out first): a drop asks ~7 questions; 256 hold every question of many drops in
+# a few MB, so the questions that recur (the goal check from the ball at rest) are found
+IK_MEMORY = 256
 X_PROBE_TIMEOUT_S = 10.0   # a local X server answers in milliseconds; a remote one that never answers must not hang
 
 
@@ -153,6 +157,7 @@ class World:
             raise RuntimeError(why)
         self.client = p.connect(p.GUI if gui else p.DIRECT)
         self.kin = ArmKinematics(config=c.ik)
+        self._ik_memory = {}   # palm_ik's answers by question
         self.steps = 0
         self.recorder = None
         self._build()
@@ -171,7 +176,7 @@ class World:
         floor = p.createCollisionShape(p.GEOM_PLANE, physicsClientId=cl)
         floor_vis = p.createVisualShape(p.GEOM_BOX, halfExtents=[1.5, 1.5, 0.001], rgbaColor=[0.82, 0.82, 0.8, 1],
                                         physicsClientId=cl)
-        p.createMultiBody(0, floor, floor_vis, [0, 0, 0], physicsClientId=cl)
+        self._underneath = [p.createMultiBody(0, floor, floor_vis, [0, 0, 0], physicsClientId=cl)]
         x0, x1 = c.table_x
         y0, y1 = c.table_y
         half = [(x1 - x0) / 2, (y1 - y0) / 2, c.table_thickness / 2]
@@ -183,7 +188,9 @@ class World:
                                    rgbaColor=[0.5, 0.36, 0.24, 1], physicsClientId=cl)
         for x in (x0 + 0.03, x1 - 0.03):
             for y in (y0 + 0.03, y1 - 0.03):
-                p.createMultiBody(0, -1, legs, [x, y, (c.table_top_z - c.table_thickness) / 2], physicsClientId=cl)
+                self._underneath.append(p.createMultiBody(0, -1, legs, [x, y, (c.table_top_z - c.table_thickness) / 2],
+                                                          physicsClientId=cl))
+        self._underneath.append(self.table)   # the floor, the legs and the table: nothing of them above its top
         self.stand_top = c.table_top_z + c.stand_height
         self.stand = p.createMultiBody(
             0, p.createCollisionShape(p.GEOM_CYLINDER, radius=c.stand_radius, height=c.stand_height,
@@ -209,6 +216,7 @@ class World:
             link = shape[1]
             seen[link] = seen.get(link, -1) + 1
             self._robot_colours.append((link, seen[link], shape[7]))
+        self._underneath = [(b, p.getVisualShapeData(b, physicsClientId=cl)[0][7]) for b in self._underneath]
         self._scene = set(self._body_ids())
         self._ungrasped = set()   # bodies whose collisions with the robot grasp() switched off
         self._saved = p.saveState(physicsClientId=cl)
@@ -342,8 +350,16 @@ class World:
         tw = torch.as_tensor(np.asarray(targets_world, dtype=float).reshape(-1, 3), dtype=torch.float64)
         tr, _ = world_to_root(tw, None, self.base_pos, self.base_quat)
         q0 = self.robot.arm_q() if q0 is None else q0
-        res = self.kin.ik(tr, target_normal=_palm_down_root().expand(len(tr), 3), q0=q0)
-        return res.q, res.success
+        # IK is a function of its inputs alone (its restarts seeded afresh each call): a question asked before, bit
+        # for bit (the goal check from the same ball, an object's reach asked again), is answered from memory
+        key = (tuple(tr.shape), tr.numpy().tobytes(), torch.as_tensor(q0, dtype=torch.float64).numpy().tobytes())
+        if key not in self._ik_memory:
+            if len(self._ik_memory) >= IK_MEMORY:
+                del self._ik_memory[next(iter(self._ik_memory))]   # the oldest
+            res = self.kin.ik(tr, target_normal=_palm_down_root().expand(len(tr), 3), q0=q0)
+            self._ik_memory[key] = (res.q, res.success)
+        q, ok = self._ik_memory[key]
+        return q.clone(), ok.clone()
 
     def drive_to(self, q, tol: float, timeout_s: float) -> bool:
         """Motors towards q (POSITION_CONTROL) and step until every joint is within tol, or the timeout."""
@@ -352,7 +368,7 @@ class World:
         for _ in range(int(round(timeout_s / self.config.tank.timestep_s))):
             self.step()
             states = p.getJointStates(rob.body, rob.arm_joints, physicsClientId=self.client)
-            if max(abs(s[0] - t) for s, t in zip(states, target)) < tol:   # in floats: no tensor per step
+            if max([abs(s[0] - t) for s, t in zip(states, target)]) < tol:   # in floats: no tensor per step
                 return True
         return False
 
@@ -448,19 +464,36 @@ class World:
         """What the robot knows of its stand (where it is, how high its top is): not of the object on it."""
         return Workspace(tuple(self.config.stand_xy), float(self.stand_top))
 
+    def eyes_above_table(self) -> bool:
+        """Whether every perception camera looks from above the table top: the side glance (the lowest of them; the
+        top view looks down from above the object, the jar's view from 6 cm above its inner bottom)."""
+        c, cam = self.config, self.config.camera
+        eye_z = (self.stand_top + cam.side_aim_cm / 100.0
+                 + cam.side_distance * math.sin(math.radians(cam.side_elevation_deg)))
+        return eye_z > c.table_top_z and self.tank.bottom_z + 0.06 > c.table_top_z
+
     @contextmanager
     def robot_unseen(self):
         """The robot invisible to the cameras inside the block (TinyRenderer skips a shape of alpha 0), then as it
         was. Its meshes are most of what a render costs, and the perception cameras look at the stand and into the
-        jar from where the robot is not in the way (sim/perception.py): the pixels they measure are the same."""
+        jar from where the robot is not in the way (sim/perception.py): the pixels they measure are the same.
+        The table, its legs and the floor go too when every eye is above the table top (`eyes_above_table`): they
+        lie wholly at or below it, and so does nothing of what a camera measures (the object on the stand or in the
+        jar), so no line from an eye to it crosses them; they only fill the background, which a render pays for by
+        its area (the table top and the floor cover most of the image: a look cost ~70 ms with them, ~40 without)."""
         cl, body = self.client, self.robot.body
         for link in sorted({link for link, _, _ in self._robot_colours}):
             p.changeVisualShape(body, link, rgbaColor=[0, 0, 0, 0], physicsClientId=cl)
+        under = self._underneath if self.eyes_above_table() else []
+        for b, rgba in under:
+            p.changeVisualShape(b, -1, rgbaColor=[*rgba[:3], 0.0], physicsClientId=cl)
         try:
             yield
         finally:
             for link, index, rgba in self._robot_colours:
                 p.changeVisualShape(body, link, shapeIndex=index, rgbaColor=list(rgba), physicsClientId=cl)
+            for b, rgba in under:
+                p.changeVisualShape(b, -1, rgbaColor=list(rgba), physicsClientId=cl)
 
     def look(self, body: int) -> Percept:
         """Look at the object on the stand (two camera images, sim/perception.py): its measurement without the

@@ -157,6 +157,25 @@ def test_a_sphere_half_under_holds_half_its_volume(client):
     assert water.submerged_volume(ball) / CM ** 3 == pytest.approx(4 / 3 * math.pi * r ** 3 - 28 * math.pi / 3,
                                                                    abs=8 * math.pi * 0.19)
 
+def test_a_sphere_wholly_under_is_wet_all_through_and_one_at_the_surface_a_cap(client):
+    # the floating sphere's step takes the cap without posing its bounds, but only where the wholly-wet test cannot
+    # pass: a sphere deep under water still counts its points' volume (the shortcut), which differs from the
+    # closed-form whole sphere in the last bits; one at the surface gets the cap
+    from sim.water import _cap
+    A = 36 * math.pi
+    water = Water(client, [0.0, 0.0], 0.0, 0.06, A * 10.0 * CM ** 3, 1 / 240)   # 10 cm of water alone
+    ball = make_body(client, "sphere", [0.06] * 3, 0.1, (0, 1, 0), [0.0, 0.0, 0.04], 0.5)
+    water.add_body(ball, "sphere", [0.06] * 3)
+    b = water.bodies[ball]
+    assert b.volume != _cap(0.06, 0.03)[0]
+    water.update_level()                             # its top 3 cm under the surface
+    assert water.submerged_volume(ball) == b.volume and b.cob.tolist() == [0.0, 0.0, 0.04]
+    p.resetBasePositionAndOrientation(ball, [0.0, 0.0, 0.105], [0, 0, 0, 1], physicsClientId=client)
+    water.update_level()                             # cut by the surface
+    h = water.level - (0.105 - 0.03)
+    assert 0 < h < 0.06 and water.submerged_volume(ball) == _cap(h, 0.03)[0]
+
+
 def test_the_spheres_level_in_python_floats_is_numpys_bit_for_bit():
     # the level with spheres alone is solved in Python floats (the ball floats there at every step): it must be the
     # numpy solve's level exactly. Spheres dry, cut and under, 1 to 3 of them (3: a short sum's order shows), from
@@ -170,10 +189,58 @@ def test_the_spheres_level_in_python_floats_is_numpys_bit_for_bit():
             water.level = float(rng.uniform(0.0, 0.15))
             base = float(rng.uniform(0.02, 0.1))
             fast = water._solve(base, [], bottoms.tolist(), radii.tolist())
-            assert fast == water._solve_points(base, [], bottoms, radii)
+            assert fast == water._solve_points_numpy(base, [], bottoms, radii)
     assert math.copysign(1, float(np.clip(np.array([-0.0]), 0.0, 1.0)[0])) == -1   # what _clip mirrors
     from sim.water import _clip
     assert math.copysign(1, _clip(-0.0, 0.0, 1.0)) == -1 and _clip(2.0, 0.0, 1.0) == 1.0 and _clip(-1, 0.0, 1) == 0
+
+
+def test_the_points_level_with_caps_in_python_floats_is_numpys_bit_for_bit():
+    # a cut body's points beside 0 to 3 spheres in closed form (a floater beside the ball): the solve with the caps
+    # in Python floats and np.clip as maximum then minimum gives numpy's level exactly
+    rng = np.random.default_rng(1)
+    water = Water(0, [0.0, 0.0], 0.0, 0.06, 0.6e-3, 1 / 240)    # no body added: no pybullet call
+    for n in (0, 1, 2, 3):
+        for _ in range(100):
+            k, layer = int(rng.integers(1, 400)), float(rng.uniform(0.001, 0.004))
+            z = rng.uniform(0.03, 0.07, k)
+            w = np.full(k, float(rng.uniform(1e-8, 1e-7)))
+            parts = [(w, z, layer, float(rng.uniform(0.0, 1e-4)))]
+            radii, bottoms = rng.uniform(0.005, 0.03, n), rng.uniform(-0.01, 0.08, n)
+            water.level = float(rng.uniform(0.03, 0.07))
+            base = float(rng.uniform(0.02, 0.05))
+            fast = water._solve_points(base, parts, bottoms.tolist(), radii.tolist())
+            assert fast == water._solve_points_numpy(base, parts, bottoms, radii)
+
+
+def test_a_body_whose_points_cannot_reach_the_wall_is_solved_as_with_the_walls_mask(client, monkeypatch):
+    # a 5 cm cube beside the ball, cut by the surface, turned any way about the vertical and tilted a little: its
+    # bounding sphere reaches the 6 cm wall, but at most such poses its points cannot (Water._across bounds them, to
+    # rounding: the water keeps 1e-9 m clear of it), and the mask is then left out; level, V_sub, waterplane and
+    # centre of buoyancy are the same bits as with the mask
+    water = Water(client, [0.0, 0.0], 0.0, 0.06, math.pi * 0.06 ** 2 * 0.05, 1 / 240)
+    cube = make_body(client, "cube", [0.05] * 3, 0.1, (1, 0, 0), [-0.02, 0.0, 0.05], 0.5)
+    water.add_body(cube, "cube", [0.05] * 3)
+    b = water.bodies[cube]
+    rng = np.random.default_rng(2)
+    skipped = 0
+    for _ in range(60):
+        q = p.getQuaternionFromEuler([*rng.normal(0.0, 0.2, 2), rng.uniform(-math.pi, math.pi)])  # as it floats
+        x = float(rng.uniform(-0.025, -0.02))   # about where an object lands beside the ball (2.05 cm off the axis)
+        p.resetBasePositionAndOrientation(cube, [x, 0.0, float(rng.uniform(0.04, 0.06))], q, physicsClientId=client)
+        R = np.array(p.getMatrixFromQuaternion(q)).reshape(3, 3)
+        posed = R @ b.points_t
+        assert np.hypot(posed[0], posed[1]).max() <= Water._across(R, b) + 1e-15
+        skipped += abs(x) + b.reach >= 0.06 > abs(x) + Water._across(R, b) + 1e-9
+        results = []
+        for across in (Water._across, lambda R, b: math.inf):    # as it runs, then always with the mask
+            monkeypatch.setattr(Water, "_across", staticmethod(across))
+            water.level = 0.05
+            water.update_level()
+            results.append((water.level, b.v_sub, b.waterplane, b.cob.tolist()))
+            monkeypatch.undo()
+        assert results[0] == results[1]
+    assert skipped >= 30
 
 
 @pytest.mark.parametrize("shape, size", [("cylinder", (0.05, 0.05, 0.08)), ("sphere", (0.06,) * 3),

@@ -8,10 +8,14 @@ import zlib
 import numpy as np
 import pybullet as p
 import pytest
+import torch
 
+import sim.world
 from sim.episode import EpisodeOutcome, FrameRecorder, _rests_on_bottom, _take, save_frames_png
+from sim.kinematics import world_to_root
 from sim.objects import (DEFAULT_OBJECTS_FILE, JarSpec, ObjectsConfig, ObjectSpec, load_objects, min_mass_g_for,
                          parse_objects)
+from sim.perception import CameraConfig
 from sim.water import CM, TankConfig, WaterConfig
 from sim.world import World, WorldConfig
 
@@ -124,6 +128,61 @@ def test_a_drop_measures_an_object_as_an_inspection_does_bit_for_bit(world, heav
     # by a drop, and an object only the trials use too): the same measurement, every float equal
     first, _ = heavy
     assert _plain(world.inspect("red_heavy_cylinder")) == _plain(first.measurement)
+
+
+def test_the_cameras_skip_the_table_and_floor_and_measure_the_same_bit_for_bit(world, monkeypatch):
+    # inside robot_unseen the table, its legs and the floor are hidden too (every eye is above the table top, and
+    # so is the object: they never stand between), and shown again after; the percept is the one they were drawn in
+    cl = world.client
+    alphas = lambda: [p.getVisualShapeData(b, physicsClientId=cl)[0][7][3] for b, _ in world._underneath]
+    assert len(world._underneath) == 6 and world.eyes_above_table() and alphas() == [1.0] * 6
+    with world.robot_unseen():
+        assert alphas() == [0.0] * 6
+    assert alphas() == [1.0] * 6
+    for name in ("yellow_light_sphere", "green_light_box"):
+        world.reset(name)
+        body = world.place_on_stand(name)
+        world.settle()
+        fast = world.look(body)
+        with monkeypatch.context() as m:
+            m.setattr(world, "eyes_above_table", lambda: False)
+            with world.robot_unseen():
+                assert alphas() == [1.0] * 6
+            drawn = world.look(body)
+        assert _plain(fast.measurement) == _plain(drawn.measurement)
+        assert fast.top_centre.tolist() == drawn.top_centre.tolist() and fast.height_m == drawn.height_m
+    # a side glance from below the table top (40 degrees down: its eye 23 cm below it) would look through the table
+    low = WorldConfig(camera=CameraConfig(side_elevation_deg=-40.0))
+    monkeypatch.setattr(world, "config", low)
+    assert not world.eyes_above_table()
+
+
+def test_palm_ik_answers_a_question_asked_before_from_memory_the_same(world, monkeypatch):
+    calls = []
+    solve = world.kin.ik
+    monkeypatch.setattr(world.kin, "ik", lambda *a, **k: calls.append(1) or solve(*a, **k))
+    monkeypatch.setattr(world, "_ik_memory", {})
+    target, other = [[0.25, -0.2, 0.62]], [[0.25, -0.2, 0.63]]
+    q, ok = world.palm_ik(target, q0=world.home_q)
+    q2, ok2 = world.palm_ik(target, q0=world.home_q)   # the same question: not solved again, the same answer
+    assert len(calls) == 1 and torch.equal(q, q2) and torch.equal(ok, ok2) and bool(ok[0])
+    q2[0, 0] += 1.0                                     # a copy: the memory is not changed through it
+    assert torch.equal(world.palm_ik(target, q0=world.home_q)[0], q) and len(calls) == 1
+    world.palm_ik(other, q0=world.home_q)               # another target, another start: solved
+    world.palm_ik(target, q0=world.home_q + 0.01)
+    assert len(calls) == 3
+    fresh = solve(*world_to_root(torch.tensor(target, dtype=torch.float64), None, world.base_pos,
+                                 world.base_quat)[:1], target_normal=torch.tensor([[0.0, 0.0, -1.0]],
+                                                                                  dtype=torch.float64),
+                  q0=world.home_q)
+    assert torch.equal(fresh.q, q)                       # what the solver answers asked afresh
+    monkeypatch.setattr(sim.world, "IK_MEMORY", 3)       # bounded: the oldest answer goes first
+    world.palm_ik([[0.25, -0.2, 0.64]], q0=world.home_q)
+    assert len(world._ik_memory) == 3 and len(calls) == 4
+    world.palm_ik(other, q0=world.home_q)                # still held
+    assert len(calls) == 4
+    world.palm_ik(target, q0=world.home_q)               # the oldest, gone: solved again
+    assert len(calls) == 5
 
 
 def test_an_objects_measurement_depends_on_the_seed_and_the_object_only():
