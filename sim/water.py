@@ -318,14 +318,7 @@ class Water:
         c = self.config
         if len(radii) >= 8:
             return self._solve_points_numpy(base, parts, np.array(bottoms), np.array(radii))
-        if not parts:
-            w = z = layer = np.zeros(0)
-        elif len(parts) == 1:
-            w, z, layer = parts[0][:3]
-        else:
-            w, z = np.concatenate([x[0] for x in parts]), np.concatenate([x[1] for x in parts])
-            layer = np.concatenate([np.full(len(x[1]), x[2]) for x in parts])
-        fixed = base + sum(x[3] for x in parts) / self.area
+        w, z, layer, fixed = self._stacked(base, parts)
         w_per_layer = w / layer
         maximum, minimum, area, L = np.maximum, np.minimum, self.area, self.level
         for _ in range(c.level_max_iterations):
@@ -342,8 +335,9 @@ class Water:
                 break
         return L
 
-    def _solve_points_numpy(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
-        c = self.config
+    def _stacked(self, base: float, parts: list):
+        """The bodies' sample points as one set (weights, heights, layer thickness) and the level the water would
+        have with only what is fixed (the base and each body's volume wholly under)."""
         if not parts:
             w = z = layer = np.zeros(0)
         elif len(parts) == 1:
@@ -351,7 +345,11 @@ class Water:
         else:
             w, z = np.concatenate([x[0] for x in parts]), np.concatenate([x[1] for x in parts])
             layer = np.concatenate([np.full(len(x[1]), x[2]) for x in parts])
-        fixed = base + sum(x[3] for x in parts) / self.area
+        return w, z, layer, base + sum(x[3] for x in parts) / self.area
+
+    def _solve_points_numpy(self, base: float, parts: list, bottoms: np.ndarray, radii: np.ndarray) -> float:
+        c = self.config
+        w, z, layer, fixed = self._stacked(base, parts)
         w_per_layer = w / layer
         L = self.level
         for _ in range(c.level_max_iterations):
