@@ -31,14 +31,12 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
+from .names import OBJECT_PROPERTIES, PROPERTIES, object_properties  # noqa: F401  (torch-free, aesop_torch/names.py)
 from .som import SOMConfig, SelfOrganizingMap
 
-PROPERTIES = ("color", "shape", "size", "weight")
 # the object's properties judged one by one: the paper's "shape" split into what decides a sinker's volume (fill:
 # volume over bounding box) and what does not (elongation: the two shorter extents over the longest)
 SPLIT_PROPERTIES = ("color", "fill", "elongation", "size", "weight")
-# every object property a map can perceive, in the maps' order: the paper's four or the split five are among them
-OBJECT_PROPERTIES = ("color", "shape", "fill", "elongation", "size", "weight")
 WORD_MAP = "word"
 MAP_NAMES = PROPERTIES + (WORD_MAP,)
 
@@ -85,12 +83,6 @@ class EncoderConfig:
         if self.properties not in (PROPERTIES, SPLIT_PROPERTIES):
             raise ValueError(f"EncoderConfig.properties must be {PROPERTIES} or {SPLIT_PROPERTIES}, "
                              f"got {self.properties}")
-
-
-def object_properties(names) -> tuple:
-    """The object's properties among `names` (a knowledge dict, a list), in the maps' order: the context's left out."""
-    names = set(names)
-    return tuple(p for p in OBJECT_PROPERTIES if p in names)
 
 
 def _log_unit(x: torch.Tensor, lo: float, hi: float) -> torch.Tensor:

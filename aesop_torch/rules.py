@@ -46,10 +46,10 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-PROPERTIES = ("color", "shape", "size", "weight")
+from .names import PROPERTIES, STATES  # noqa: F401  (torch-free, aesop_torch/names.py)
+
 RULE_NAMES = ("S", "E", "G", "U")  # codes 0..3 in `CausalRules.apply`'s output
 STATUS_QUO, ELIMINATION, GROWTH, UNCERTAINTY = range(4)
-STATES = ("unknown", "likely_irrelevant", "dominant", "irrelevant")
 KNOWLEDGE_LETTERS = "ULDI"   # one letter per STATES code, in its order: a knowledge key such as "IDUU"
 UNKNOWN, LIKELY_IRRELEVANT, DOMINANT, IRRELEVANT = range(4)
 CONTEXTS = ("floating", "sinking", "mixed")   # both floated, both sank, one of each (or a fate not seen)

@@ -42,7 +42,7 @@ from train.common.exits import (UsageError, console, ending_signals, exit_now, f
                                 raise_pending, sigint_ignored)
 from train.runner.out_dir import check_out, lock_out  # noqa: E402, F401
 from train.common.models import ABLATION_HELP, ABLATIONS, EXPLORE, MODEL_HELP, MODELS, check_capacity  # noqa: E402
-from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, MAX_ORDERS,  # noqa: E402, F401
+from train.runner.settings import (DEFAULT_OBJECTS, DEFAULT_ORDERS, FULL_RUNS, MAX_ORDERS,  # noqa: E402, F401
                                    adopt_run, count_orders, gather_config, load_objects_or_fail,
                                    load_run_objects, orders_arg, resolve_config, seed_arg, world_kw)
 
@@ -160,7 +160,9 @@ def _main(argv=None) -> int:
             objects = load_run_objects(args)
             n_orders = count_orders(len(objects.train), args.orders)
             check_out(args.out, args.resume)
-            run_loop.start_drawer()   # before torch's import: it imports the figure's modules on the idle core
+            # before torch's import: it imports the figure's modules on the idle core (and the population's, when
+            # one will run there: more orders than run in detail, on cached physics)
+            run_loop.start_drawer(population=n_orders > FULL_RUNS and args.physics == "cached")
             # every key of the config and the capacity are checked before the first line (that imports torch and
             # the simulator: about a second), so a refused one never follows a "starting"
             args.run_config = resolve_config(args, objects)

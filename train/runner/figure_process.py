@@ -1,24 +1,34 @@
 """Figure 2 drawn in a process of its own, started before the runner imports torch.
 
 The runner's first second is torch's import, on one core, while the other core idles. A process started then imports
-`train.runner.figures` there (matplotlib, and torch through `aesop_torch.rules`' names: ~1.6 s on that core) and waits, so
-Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal trials) instead of an import and a drawing after
-them. It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it and ends the process) and lives until
+`train.runner.figures` there (matplotlib: ~0.5 s on that core; not torch: the figure's names come from the torch-free
+`aesop_torch.names`) and waits, so Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal trials)
+instead of an import and a drawing after them. A run with a population (more orders than it runs in detail) runs it
+here too (train/runner/loop.py): that process also imports `train.learning.population` (torch) at its start, beside
+the runner's own torch import, rather than after the simulations, when the population is the run's longest part.
+It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it and ends the process) and lives until
 `close`.
 """
 
 from __future__ import annotations
 
+import importlib
+
 from train.learning.sim_pool import by_name, end_pool, quiet_pool
 
+FIGURES = "train.runner.figures"
+POPULATION = "train.learning.population"
 
-def _init() -> None:
-    import train.runner.figures  # noqa: F401  the import this process exists to take off the runner's critical path
+
+def _init(modules: tuple) -> None:
+    for module in modules:   # the imports this process exists to take off the runner's critical path
+        importlib.import_module(module)
 
 
 class Drawer:
-    def __init__(self):
-        self._pool = quiet_pool(1, _init)
+    def __init__(self, population: bool = False):
+        """population: the run will hand this process its population (its modules imported at the start)."""
+        self._pool = quiet_pool(1, _init, ((FIGURES, POPULATION) if population else (FIGURES,),))
 
     def draw(self, target: str, *args):
         """target(*args) there, target given as "module:function": an object whose get() waits for the result."""

@@ -24,14 +24,13 @@ from matplotlib.lines import Line2D  # noqa: E402
 from matplotlib.colors import to_rgba  # noqa: E402
 from matplotlib.ticker import FuncFormatter, MaxNLocator, NullFormatter  # noqa: E402
 
-from aesop_torch.encoders import OBJECT_PROPERTIES, PROPERTIES, object_properties  # noqa: E402
-from aesop_torch.rules import STATES  # noqa: E402
+from aesop_torch.names import OBJECT_PROPERTIES, PROPERTIES, STATES, object_properties  # noqa: E402
 from train.common.quantiles import weighted_quantiles  # noqa: E402
 
 MAX_CURVES = 12  # orders drawn one by one; with more, medians and bands over all orders (a person reads ~12 curves)
-STATE_LETTERS = "ULDI"   # per rules.STATES: unknown, likely irrelevant, dominant, irrelevant
+STATE_LETTERS = "ULDI"   # per names.STATES: unknown, likely irrelevant, dominant, irrelevant
 STATE_MARKERS = tuple(rf"$\mathbf{{{ch}}}$" for ch in STATE_LETTERS)   # each point drawn as its state's letter
-# per encoders.OBJECT_PROPERTIES (ColorBrewer Dark2): shape, fill and elongation apart, the rest as before
+# per names.OBJECT_PROPERTIES (ColorBrewer Dark2): shape, fill and elongation apart, the rest as before
 PROPERTY_COLOURS = ("#1b9e77", "#d95f02", "#66a61e", "#e6ab02", "#7570b3", "#e7298a")
 ERROR_CLIP = 1e-4        # errors below (a fraction: 0.01 %), exact zeros included, drawn there on the log axis
 BAND = (0.1, 0.9)        # a population's band: these quantiles over orders

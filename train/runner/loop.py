@@ -38,12 +38,13 @@ def close_quietly() -> None:
         _OPEN["physics"], _OPEN["drawer"], _OPEN["logs"] = None, None, []
 
 
-def start_drawer() -> None:
-    """The figure process (train/runner/figure_process.py), started now and kept in _OPEN in one step (a pool dropped halfway
-    would be ended only by its finaliser)."""
+def start_drawer(population: bool = False) -> None:
+    """The figure process (train/runner/figure_process.py), started now and kept in _OPEN in one step (a pool dropped
+    halfway would be ended only by its finaliser). population: it will run the run's population (_start_population),
+    so it imports that too at its start."""
     from train.runner.figure_process import Drawer
     with signals_held():
-        _OPEN["drawer"] = _OPEN["drawer"] or Drawer()
+        _OPEN["drawer"] = _OPEN["drawer"] or Drawer(population)
 
 
 def prepare(args, objects, n_orders: int, physics=None):
@@ -55,7 +56,7 @@ def prepare(args, objects, n_orders: int, physics=None):
 
     from aesop_torch.malloc import keep_freed_memory
     from train.learning.experiment import Experiment, draw_orders
-    from train.runner.summary import FULL_RUNS
+    from train.runner.settings import FULL_RUNS
 
     keep_freed_memory()   # freed tensors are reused rather than faulted in again (aesop_torch/malloc.py)
 

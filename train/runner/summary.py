@@ -23,14 +23,13 @@ from pathlib import Path
 
 from aesop_torch.encoders import object_properties
 from aesop_torch.rules import KNOWLEDGE_LETTERS, STATES
+from train.runner.settings import FULL_RUNS  # noqa: F401  (its home: the runner's settings, torch-free)
 
 ROOT = Path(__file__).resolve().parents[2]
 GIT_TIMEOUT_S = 5.0
 # a git environment that points elsewhere would describe another repository
 GIT_REDIRECTS = ("GIT_DIR", "GIT_WORK_TREE", "GIT_INDEX_FILE", "GIT_COMMON_DIR", "GIT_OBJECT_DIRECTORY")
 VERSIONED = ("torch", "pybullet", "numpy")
-
-FULL_RUNS = 64  # 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB
 
 
 def knowledge_key(k: dict) -> str:
