@@ -52,3 +52,18 @@ def test_the_names_are_the_ones_the_library_uses():
     assert encoders.OBJECT_PROPERTIES is names.OBJECT_PROPERTIES and rules.STATES is names.STATES
     assert len(rules.KNOWLEDGE_LETTERS) == len(names.STATES)
     assert encoders.object_properties({"weight": 1, "width": 2, "color": 3}) == ("color", "weight")
+
+
+def test_the_collector_is_off_while_the_runner_imports_and_on_in_what_it_forks():
+    out = fresh("import gc\n"
+                "from train.common.collector import imports_begin, imports_done\n"
+                "from train.learning.sim_pool import by_name, end_pool, quiet_pool\n"
+                "imports_done()\n"   # the collector was on: nothing frozen
+                "print(gc.isenabled(), gc.get_freeze_count())\n"
+                "imports_begin()\n"
+                "pool = quiet_pool(1, None)\n"   # forked while it is off: on in the child
+                "print(gc.isenabled(), pool.apply_async(by_name, ('gc:isenabled', ())).get(timeout=60))\n"
+                "end_pool(pool)\n"
+                "imports_done()\n"
+                "print(gc.isenabled(), gc.get_freeze_count() > 0)\n")
+    assert out == ["True", "0", "False", "True", "True", "True"]

@@ -30,6 +30,8 @@ from train.common import exits  # noqa: E402
 
 if __name__ == "__main__":
     exits.early_signals()
+    from train.common.collector import imports_begin  # noqa: E402
+    imports_begin()   # the collector off while torch and the rest are imported (train/common/collector.py)
 
 import argparse  # noqa: E402
 import time  # noqa: E402
@@ -206,6 +208,8 @@ def _is_task_file(path: Path) -> bool:
 def run_task(args) -> int:
     """--objects is a task file of the Aesop battery (sim/tasks/): --orders N agents of --seed explore and play it in
     the apparatus built in pybullet (train/battery/task_run.py). It has no checkpoints: an interrupted task run starts again."""
+    from train.common.collector import imports_done
+    imports_done()   # the collector on for the run (train/common/collector.py)
     given = [flag for flag, on in (("--resume", args.resume), ("--config/--set", args.overrides.keys() -
                                                                      {"model", "ablate", "seed"}),
                                    ("--gui", args.gui), ("--physics per-episode", args.physics != "cached")) if on]
@@ -244,7 +248,9 @@ def run_task(args) -> int:
 def console_main() -> None:
     """`python train/run.py` and the console command aesop-run: the run, then its exit without the interpreter's
     teardown (everything is written and closed; train/common/exits.py exit_now)."""
+    from train.common.collector import imports_begin
     exits.early_signals()   # aesop-run's (the script's already, before its imports)
+    imports_begin()   # aesop-run's (the script's already): train/common/collector.py
     exit_now(main())
 
 

@@ -48,6 +48,7 @@ import sys
 import threading
 
 from sim.errors import WorldBuildError
+from train.common.collector import imports_done
 from train.common.exits import signals_held
 
 _WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
@@ -128,6 +129,7 @@ def _start(parent: int, initializer, initargs: tuple) -> None:
     _die_with(parent)
     if initializer is not None:
         initializer(*initargs)
+    imports_done()   # forked while the runner's collector was off (its start): on again here, after the imports
 
 
 class _NotReplaced:
@@ -285,6 +287,7 @@ class Physics:
             return
         if START_METHOD == "fork":
             import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
+            imports_done()   # the runner's objects frozen before the fork (train/common/collector.py)
         self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config),
                                 what="a physics worker")
 

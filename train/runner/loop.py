@@ -12,6 +12,7 @@ import copy
 import sys
 import time
 
+from train.common.collector import imports_done
 from train.common.exits import UsageError, fresh_line, how, os_error, sigint_ignored, signals_held
 from train.runner.out_dir import CONFIG_NAME, RUN_NAME, holds_a_run, lock_out, remove_leftovers, unlock_created
 from train.runner.settings import agent_keys_set, check_same_config, check_same_run, run_settings, world_kw
@@ -103,6 +104,8 @@ def prepare(args, objects, n_orders: int, physics=None):
         # refused or interrupted after all: leave nothing behind
         unlock_created(args.out, lock, created)
         raise
+    finally:
+        imports_done()   # the collector on for the run, whichever way it was prepared (train/common/collector.py)
 
 
 def resume_experiment(args, objects):
