@@ -2,6 +2,7 @@
 draw without drawing all, a population drawn and run on another process, the first simulations handed over early,
 Figure 2 encoded once for every log."""
 
+import numpy as np
 import pytest
 import torch
 
@@ -124,6 +125,57 @@ def test_jobs_submitted_early_are_taken_up_by_the_same_jobs_submit():
     assert physics.submit([("drop", "red_light_cylinder", False)]) is not early   # other jobs: their own
     assert physics.submit(list(jobs)) is early                                     # the same: taken up, once
     assert physics.submit(jobs) is not early and physics._early is None
+
+
+@pytest.mark.timeout(120)
+def test_workers_forked_with_the_world_built_once_simulate_what_a_world_built_here_does(monkeypatch):
+    import multiprocessing
+    import sim.world
+    from train.learning import sim_pool
+
+    builds = multiprocessing.get_context("fork").Value("i", 0)   # counted in whichever process builds a world
+
+    class Counted(sim.world.World):
+        def __init__(self, *args, **kwargs):
+            with builds.get_lock():
+                builds.value += 1
+            super().__init__(*args, **kwargs)
+    monkeypatch.setattr(sim.world, "World", Counted)
+    objs = load_objects(DEFAULT_OBJECTS_FILE)
+    jobs = [("inspect", objs.probe[0].name, None), ("drop", "red_light_cylinder", None)]
+    pool = Physics(objs, workers=2)
+    try:
+        pool.start()
+        assert sim_pool._WORLD is None   # this process's copy closed once the workers hold theirs
+        forked = pool.run(jobs)
+    finally:
+        pool.close()
+    assert builds.value == 1   # one world for both workers, not one each
+    here = Physics(objs, workers=1)
+    try:
+        own = here.run(jobs)
+    finally:
+        here.close()
+    same = lambda a, b: a.keys() == b.keys() and all(np.array_equal(a[k], b[k]) for k in a)   # every bit
+    assert same(forked[0], own[0]) and same(forked[1].measurement, own[1].measurement)
+    for field in ("observed_cm3", "level_before_cm", "level_after_cm", "goal_reachable_before", "goal_reached_after",
+                  "sank", "settled", "delivered"):
+        assert getattr(forked[1], field) == getattr(own[1], field), field
+
+
+def test_a_world_that_cannot_be_built_before_the_fork_fails_each_job_in_one_line(monkeypatch):
+    import sim.world
+    from sim.errors import WorldBuildError
+
+    def refuse(*args, **kwargs):
+        raise ValueError("no room for the jar\nsecond line")
+    monkeypatch.setattr(sim.world, "World", refuse)
+    physics = Physics(load_objects(DEFAULT_OBJECTS_FILE), workers=2)
+    try:
+        with pytest.raises(WorldBuildError, match=r"^the world could not be built: ValueError: no room for the jar$"):
+            physics.run([("inspect", "blue_heavy_cylinder", None)])
+    finally:
+        physics.close()
 
 
 def test_figure_2_encoded_once_writes_what_add_image_writes(tmp_path):

@@ -5,17 +5,20 @@ from (seed, object name), so an object's outcome is the same bit for bit whichev
 it simulated before; a goal trial's sequence of drops starts from a fresh jar the same way (sim/trial.py). That
 makes the physics embarrassingly parallel: the profile of a default run showed the drops and inspections (13
 independent simulations) taking 9 of its 12 s, so they run on every core at once, and so do the goal trials' drop
-sequences (each round's new ones at once). Each worker builds its world once.
+sequences (each round's new ones at once). Each worker has one world for all its jobs.
 
-`start` forks the workers, which build their worlds while the runner builds its experiment; `submit` hands them jobs
-without waiting, so the runner opens its logs while they simulate; `ahead` starts one job whose result may be wanted
-later (a goal trial's drops the runner expects, simulated while the agents learn). The pool lives until `close`.
+`start` builds the world and forks the workers, each with its copy of it, while the runner goes on to build its
+experiment; `submit` hands them jobs without waiting, so the runner opens its logs while they simulate; `ahead`
+starts one job whose result may be wanted later (a goal trial's drops the runner expects, simulated while the agents
+learn). The pool lives until `close`.
 
 On Linux the workers are forked from the runner: a fresh interpreter ("spawn") spends ~1.5 s importing torch,
 pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy machine; a forked one has them already
-(`start` imports the simulator just before it forks: once, not once per worker). It is safe here: the runner holds
-no pybullet client (a GUI simulates in-process), and a worker's torch runs on one thread (`_init`), so it never
-waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
+(`start` imports the simulator and builds the world just before it forks: once, not once per worker). It is safe
+here: the one pybullet client the runner holds at the fork is that world's, a DIRECT one (in-process: no thread, no
+socket, no shared memory; a GUI simulates in-process, without workers), so each worker's copy is a world of its own
+(tests/test_speed_paths.py: the same outcomes as a world built in place); and a worker's torch runs on one thread
+(`_init_forked`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
 writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
 Every world is built from the Physics' `world` config (sim.world.WorldConfig; None: the default). A world that
@@ -71,16 +74,30 @@ class WorkerDied(RuntimeError):
 
 
 def _init(objects, seed: int, config=None) -> None:
+    """A spawned worker's start: its world built here."""
     global _WORLD
     import torch
 
     torch.set_num_threads(1)  # one process per core
+    _WORLD = _build(objects, seed, config)
+
+
+def _init_forked() -> None:
+    """A forked worker's start: the world its parent built just before the fork (Physics.start) is its own copy."""
+    import torch
+
+    torch.set_num_threads(1)  # one process per core
+
+
+def _build(objects, seed: int, config=None):
+    """The World, or why it could not be built (WorldBuildError: raised by every job, not by a pool's initializer,
+    which would have its workers respawned for ever)."""
     from sim.world import World
     try:
-        _WORLD = World(objects, config=config, seed=seed)
-    except Exception as e:  # noqa: BLE001  a pool whose initializer raises respawns its workers for ever: report it
+        return World(objects, config=config, seed=seed)
+    except Exception as e:  # noqa: BLE001  reported by the jobs
         lines = str(e).strip().splitlines()
-        _WORLD = WorldBuildError(f"the world could not be built: {type(e).__name__}: {lines[0] if lines else ''}")
+        return WorldBuildError(f"the world could not be built: {type(e).__name__}: {lines[0] if lines else ''}")
 
 
 def _task(job: tuple):
@@ -282,14 +299,33 @@ class Physics:
         self._early = None   # (jobs, their results) handed over by submit_early, for submit to take up
 
     def start(self) -> None:
-        """Fork the workers now (each imports the simulator and builds its world while the caller goes on)."""
+        """Start the workers now. Forked (Linux): the world is built here once, and each worker forked with its own
+        copy of it (every job starts from the scene as built, restored: a copy built elsewhere is the same scene), not
+        built again in each (~0.4 CPU-s apiece, beside the runner building its experiment); this process's copy is
+        closed once they are forked. Spawned: each imports the simulator and builds its world while the caller goes
+        on."""
+        global _WORLD
         if self.workers == 1 or self._pool is not None:
             return
-        if START_METHOD == "fork":
-            import sim.world  # noqa: F401  imported once here and inherited, not once per worker (0.3 s each)
+        if START_METHOD != "fork":
+            self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config),
+                                    what="a physics worker")
+            return
+        import torch
+
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)   # built as a worker would build it
+        try:
+            _WORLD = _build(self.objects, self.seed, self.world_config)
+        finally:
+            torch.set_num_threads(threads)
+        try:
             imports_done()   # the runner's objects frozen before the fork (train/common/collector.py)
-        self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config),
-                                what="a physics worker")
+            self._pool = quiet_pool(self.workers, _init_forked, what="a physics worker")
+        finally:   # the workers hold their copies (Pool forks them all before it returns): this one is not used
+            world, _WORLD = _WORLD, None
+            if not isinstance(world, WorldBuildError):
+                world.close()
 
     def submit(self, jobs: list[tuple]):
         """Hand the jobs to the workers without waiting: an iterator of their results in job order (each waited

@@ -52,7 +52,8 @@ def prepare(args, objects, n_orders: int, physics=None):
     """Validate the rest (needs torch) and return (experiment, resumed, lock fd). Locks --out first, so that a
     checkpoint is read and verified only by the run that owns it; nothing else is written before everything is
     checked. physics (train.learning.sim_pool.Physics, optional): a new run forks its workers once everything is checked and
-    before the experiment is built, so they build their worlds while the maps train (0.3 s off the wall time)."""
+    before the experiment is built (the world built once, train/learning/sim_pool.py), so they simulate while the
+    maps train."""
     import torch
 
     from aesop_torch.malloc import keep_freed_memory
