@@ -311,7 +311,11 @@ class Physics:
             self._pool = quiet_pool(self.workers, _init, (self.objects, self.seed, self.world_config),
                                     what="a physics worker")
             return
+        import numpy.ma  # noqa: F401  np.median's first call imports it (~0.06 s), once here rather than in each worker
         import torch
+
+        import sim.episode  # noqa: F401  a drop's and an inspection's code, likewise
+        import sim.trial  # noqa: F401  a goal trial's
 
         threads = torch.get_num_threads()
         torch.set_num_threads(1)   # built as a worker would build it
