@@ -24,13 +24,16 @@ def fresh(code: str) -> list[str]:
 
 def test_the_figure_process_imports_torch_only_to_run_a_population():
     loaded = "'torch' in __import__('sys').modules"
+    prepared = "list(__import__('train.learning.population', fromlist=['_']).__dict__.get('_PREPARED', {'-': 0}))"
     out = fresh("from train.runner.figure_process import Drawer\n"
-                "for population in (False, True):\n"
+                "for population in (None, (3, 'all', 0)):\n"
                 "    d = Drawer(population)\n"
                 f"    print(d.draw('builtins:eval', {loaded!r}).get(timeout=60))\n"
+                f"    print(d.draw('builtins:eval', {prepared!r}).get(timeout=60) if population else '')\n"
                 "    d.close()\n"
                 f"print({loaded})\n")
-    assert out == ["False", "True", "False"]   # the figure alone; with the population; the runner itself untouched
+    # the figure alone; with the population (its orders prepared); the runner itself untouched
+    assert out == ["False", "True", "[(3,", "'all',", "0)]", "False"]
 
 
 def test_the_names_module_and_the_figures_are_torch_free():

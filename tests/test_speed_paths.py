@@ -117,6 +117,24 @@ def test_run_orders_is_run_population_of_the_drawn_orders_without_the_prediction
         assert got[k] == want[k], k
 
 
+def test_orders_prepared_ahead_give_the_same_population_and_are_taken_once(world, monkeypatch):
+    from train.learning import population
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+    want = run_orders(names, probe_names, "all", 0, outcomes, probes, AgentConfig())
+    population.prepare_orders(3, "all", 0)
+    order_t, trie = population._PREPARED[(3, "all", 0)]
+    built = []
+    monkeypatch.setattr(population, "_Trie", lambda orders: built.append(orders) or trie)
+    got = run_orders(names, probe_names, "all", 0, outcomes, probes, AgentConfig())
+    assert built == [] and population._PREPARED == {}   # the prepared trie used, not built again; taken once
+    for k in got.keys() - {"timing_s"}:
+        assert got[k] == want[k], k
+    other = order_t.clone()   # the same rows, another tensor: its own trie is built
+    population._Walk(names, probe_names, outcomes, probes, other, 8, None, trie=trie)
+    assert len(built) == 1 and built[0] is other
+
+
 def test_jobs_submitted_early_are_taken_up_by_the_same_jobs_submit():
     physics = Physics(load_objects(DEFAULT_OBJECTS_FILE), workers=1)   # in this process: lazy, nothing simulated
     jobs = [("drop", "red_heavy_cylinder", False), ("inspect", "blue_heavy_cylinder", None)]

@@ -164,7 +164,8 @@ def _main(argv=None) -> int:
             check_out(args.out, args.resume)
             # before torch's import: it imports the figure's modules on the idle core (and the population's, when
             # one will run there: more orders than run in detail, on cached physics)
-            run_loop.start_drawer(population=n_orders > FULL_RUNS and args.physics == "cached")
+            run_loop.start_drawer((len(objects.train), args.orders, args.seed)
+                                  if n_orders > FULL_RUNS and args.physics == "cached" else None)
             # every key of the config and the capacity are checked before the first line (that imports torch and
             # the simulator: about a second), so a refused one never follows a "starting"
             args.run_config = resolve_config(args, objects)

@@ -192,6 +192,7 @@ class _Trie:
 
     def __init__(self, orders: torch.Tensor):
         N, n = orders.shape
+        self.orders = orders   # what it was built from (a trie prepared ahead is used only for these orders)
         perm = torch.arange(N)
         if not _sorted_rows(orders):   # (all orders come sorted: the stable sorts would leave them as they are)
             for c in reversed(range(n)):   # least significant column first, stable sorts: lexicographic order
@@ -215,7 +216,7 @@ class _Trie:
 def run_population(train_names: list[str], probe_names: list[str], orders: list[list[int]], outcomes: dict,
                    probes: dict, config: AgentConfig, chunk: int = DEFAULT_CHUNK, progress=None,
                    threads: int | None = None, merge: bool = True, curves: bool = False,
-                   probe_process: bool = False, maps: dict | None = None) -> dict:
+                   probe_process: bool = False, maps: dict | None = None, trie: _Trie | None = None) -> dict:
     """Run every order to its end; return the final knowledge and probe error of each, in the order given.
 
     orders: lists of indices into train_names, all of length len(train_names) (as train.learning.experiment.draw_orders
@@ -229,7 +230,8 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     probe_process=True (with curves, Linux): those probe readings are made on a process of its own, forked here
     (`_ProbeProcess`), beside the walk: they were half of the population's time on one core. maps: the property
     maps' state (`Agent.maps.state_dict()`, tensors or arrays) of an agent of this config, developed already (the
-    runner's experiment's): loaded instead of developed again (0.3-0.8 s), as a resumed run loads them.
+    runner's experiment's): loaded instead of developed again (0.3-0.8 s), as a resumed run loads them. trie: the
+    orders' trie built already (prepare_orders), else built here.
 
     Returns {"orders", "final_knowledge" (key per order), "final_probe_rel_error" (per order, rounded to 4 places as
     in the episode records; None while nothing can be predicted), "final_probe_cm3" ((orders, probes) float tensor:
@@ -278,7 +280,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
             root.maps.load_state_dict({k: torch.as_tensor(v) for k, v in maps.items()})
         root.memory = SharedRecallMemory(config.memory, batch=1)   # its children (Agent.select) inherit it
         t_setup = time.perf_counter()
-        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge, curves)
+        walk = _Walk(train_names, probe_names, outcomes, probes, order_t, chunk, progress, merge, curves, trie)
         walk.perceive(root)
         if curves and probe_process and hasattr(os, "fork"):
             walk.helper = _ProbeProcess(walk, root)
@@ -315,6 +317,18 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
     return out
 
 
+_PREPARED: dict = {}   # (n_objects, orders, seed) -> (the order tensor, its trie), made ahead by prepare_orders
+
+
+def prepare_orders(n_objects: int, orders: str, seed: int) -> None:
+    """Draw the orders and build their trie now, for the run_orders call of the same (n_objects, orders, seed) to
+    take: the runner's figure process does this at its start, on the core its torch import leaves idle, rather than
+    when the simulations are in and the population is the run's longest part (9! orders: ~0.2 s)."""
+    from train.learning.experiment import order_tensor
+    order_t = order_tensor(n_objects, orders, seed)
+    _PREPARED[(n_objects, orders, seed)] = (order_t, _Trie(order_t))
+
+
 def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed: int, outcomes: dict, probes: dict,
                config: AgentConfig, maps: dict | None = None) -> dict:
     """run_population over draw_orders(len(train_names), orders, seed), drawn here, with curves, without
@@ -326,8 +340,10 @@ def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed
     from train.learning.sim_pool import cores
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
-    out = run_population(train_names, probe_names, order_tensor(len(train_names), orders, seed), outcomes, probes,
-                         config, curves=True, probe_process=cores() > 1, maps=maps)
+    prepared = _PREPARED.pop((len(train_names), orders, seed), None)
+    order_t, trie = prepared or (order_tensor(len(train_names), orders, seed), None)
+    out = run_population(train_names, probe_names, order_t, outcomes, probes, config, curves=True,
+                         probe_process=cores() > 1, maps=maps, trie=trie)
     del out["final_probe_cm3"]
     return out
 
@@ -458,8 +474,9 @@ class _Walk:
     Each order ends at a leaf result (knowledge and probe predictions), computed once per distinct final state."""
 
     def __init__(self, train_names, probe_names, outcomes, probes, orders, chunk, progress, merge=True,
-                 curves=False):
-        self.trie, self.chunk, self.progress, self.merge = _Trie(orders), chunk, progress, merge
+                 curves=False, trie: _Trie | None = None):
+        self.trie = trie if trie is not None and trie.orders is orders else _Trie(orders)
+        self.chunk, self.progress, self.merge = chunk, progress, merge
         self.n, self.N = orders.shape[1], orders.shape[0]
         recs = [outcomes[name] for name in train_names]
         self.meas = stack_measurements([r["measurement"] for r in recs])          # (n_objects, ...) per key

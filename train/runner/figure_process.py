@@ -5,7 +5,8 @@ The runner's first second is torch's import, on one core, while the other core i
 `aesop_torch.names`) and waits, so Figure 2 at the end costs its drawing alone (~0.3 s, beside the goal trials)
 instead of an import and a drawing after them. A run with a population (more orders than it runs in detail) runs it
 here too (train/runner/loop.py): that process also imports `train.learning.population` (torch) at its start, beside
-the runner's own torch import, rather than after the simulations, when the population is the run's longest part.
+the runner's own torch import, and draws the population's orders, rather than after the simulations, when the
+population is the run's longest part.
 It holds no pybullet and no world. It ignores Ctrl-C (the runner owns it and ends the process) and lives until
 `close`.
 """
@@ -20,15 +21,18 @@ FIGURES = "train.runner.figures"
 POPULATION = "train.learning.population"
 
 
-def _init(modules: tuple) -> None:
+def _init(modules: tuple, orders: tuple | None) -> None:
     for module in modules:   # the imports this process exists to take off the runner's critical path
         importlib.import_module(module)
+    if orders is not None:   # and the population's orders, drawn and put in a trie meanwhile
+        importlib.import_module(POPULATION).prepare_orders(*orders)
 
 
 class Drawer:
-    def __init__(self, population: bool = False):
-        """population: the run will hand this process its population (its modules imported at the start)."""
-        self._pool = quiet_pool(1, _init, ((FIGURES, POPULATION) if population else (FIGURES,),))
+    def __init__(self, population: tuple | None = None):
+        """population: (n_objects, orders, seed) of the population the run will hand this process (its modules
+        imported and its orders prepared at the start: train.learning.population.prepare_orders), or None."""
+        self._pool = quiet_pool(1, _init, ((FIGURES, POPULATION) if population else (FIGURES,), population))
 
     def draw(self, target: str, *args):
         """target(*args) there, target given as "module:function": an object whose get() waits for the result."""

@@ -39,10 +39,10 @@ def close_quietly() -> None:
         _OPEN["physics"], _OPEN["drawer"], _OPEN["logs"] = None, None, []
 
 
-def start_drawer(population: bool = False) -> None:
+def start_drawer(population: tuple | None = None) -> None:
     """The figure process (train/runner/figure_process.py), started now and kept in _OPEN in one step (a pool dropped
-    halfway would be ended only by its finaliser). population: it will run the run's population (_start_population),
-    so it imports that too at its start."""
+    halfway would be ended only by its finaliser). population: (n_objects, orders, seed) of the population it will
+    run (_start_population), so that it imports that too and prepares its orders at its start; None: none."""
     from train.runner.figure_process import Drawer
     with signals_held():
         _OPEN["drawer"] = _OPEN["drawer"] or Drawer(population)
