@@ -214,6 +214,33 @@ def test_figure_2_encoded_once_writes_what_add_image_writes(tmp_path):
     assert got[0] == got[1] and len(got[0]) == 1 and got[0][0][:3] == (8, 5, 6)
 
 
+def test_the_same_image_event_in_every_log_is_checksummed_once_to_the_same_value(tmp_path, monkeypatch):
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+    from tensorboard.compat.tensorflow_stub.pywrap_tensorflow import masked_crc32c
+    from tensorboard.summary.writer import record_writer
+
+    from train.runner.tensorboard_log import OrderLog, _LastCrc
+    crc = record_writer.masked_crc32c
+    assert isinstance(crc, _LastCrc)
+    big = bytes(range(256)) * 40
+    for data in (b"", b"abc", big, big[:-1] + b"x", big):   # small, large, another large, the first again
+        assert crc(data) == masked_crc32c(data)
+    calls = []
+    monkeypatch.setattr(crc, "crc", lambda data: calls.append(len(data)) or masked_crc32c(data))
+    noise = torch.randint(0, 256, (60, 50, 3), generator=torch.Generator().manual_seed(0))
+    encoded = OrderLog.encoded("figure2", noise.to(torch.uint8).numpy())   # ~9 kB of PNG: a large record
+    logs = [OrderLog(tmp_path / f"o{b}") for b in range(3)]
+    for log in logs:
+        log.shown(encoded, 8, 1234.5)
+    for log in logs:
+        log.close()
+    assert len([n for n in calls if n >= _LastCrc.LARGE]) == 1   # one image event's bytes, checksummed once
+    for b in range(3):   # each log reads back whole (a wrong checksum would be a corrupt record)
+        acc = EventAccumulator(str(tmp_path / f"o{b}"), size_guidance={"images": 0})
+        acc.Reload()
+        assert [(e.wall_time, e.step, e.width, e.height) for e in acc.Images("figure2")] == [(1234.5, 8, 50, 60)]
+
+
 def test_probe_readings_on_a_process_of_their_own_are_the_walks_own(world):
     """The population's curves read on a forked process (run_orders' way with 2 cores) give what the walk reads
     itself: every result the same, the predictions bit for bit; the child is gone after."""

@@ -316,9 +316,9 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         image = figure.get()
     except WorkerDied as e:   # the drawer's pool names its process generically
         raise WorkerDied("the figure process", e.pid, e.exitcode) from None
-    shown = logs and logs[0].encoded("figure2", image)
+    shown, now = logs and logs[0].encoded("figure2", image), time.time()
     for log in logs:
-        log.shown(shown, exp.n_episodes)
+        log.shown(shown, exp.n_episodes, now)   # one wall time: the same event bytes, checksummed once
         log.close()   # not quietly: a write error here is the run's (one line, exit code 1)
     _OPEN["logs"] = []
     close_quietly()   # the workers and the drawer: every result is in
