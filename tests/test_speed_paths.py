@@ -135,6 +135,26 @@ def test_orders_prepared_ahead_give_the_same_population_and_are_taken_once(world
     assert len(built) == 1 and built[0] is other
 
 
+def test_figure_2_of_the_population_run_last_here_is_the_figure_of_its_answer(world, tmp_path, monkeypatch):
+    from train.learning import population
+    from train.runner.figure_process import POPULATION_FIGURE_KEYS, figure_of_the_population
+    from train.runner.figures import save_figure2
+    objs, outcomes, probes = world
+    names, probe_names = list(THREE), [p.name for p in objs.probe]
+    exp = Experiment(names, probe_names, [[0, 1, 2], [2, 1, 0]])
+    exp.probes = probes
+    while not exp.done:
+        exp.step(lambda name, b, t: outcomes[name])
+    monkeypatch.setattr(population, "LAST", {})
+    with pytest.raises(RuntimeError, match="no population"):
+        figure_of_the_population(exp.records, tmp_path / "none.png", 40, 0.05)
+    answer = run_orders(names, probe_names, "all", 0, outcomes, probes, AgentConfig())
+    assert population.LAST == answer
+    figure_of_the_population(exp.records, tmp_path / "last.png", 40, 0.05)
+    save_figure2(exp.records, tmp_path / "sent.png", 40, 0.05, {k: answer[k] for k in POPULATION_FIGURE_KEYS})
+    assert (tmp_path / "last.png").read_bytes() == (tmp_path / "sent.png").read_bytes()
+
+
 def test_jobs_submitted_early_are_taken_up_by_the_same_jobs_submit():
     physics = Physics(load_objects(DEFAULT_OBJECTS_FILE), workers=1)   # in this process: lazy, nothing simulated
     jobs = [("drop", "red_heavy_cylinder", False), ("inspect", "blue_heavy_cylinder", None)]

@@ -318,6 +318,7 @@ def run_population(train_names: list[str], probe_names: list[str], orders: list[
 
 
 _PREPARED: dict = {}   # (n_objects, orders, seed) -> (the order tensor, its trie), made ahead by prepare_orders
+LAST: dict = {}   # run_orders' last answer in this process: the figure process draws Figure 2 from it (figure_process)
 
 
 def prepare_orders(n_objects: int, orders: str, seed: int) -> None:
@@ -340,11 +341,13 @@ def run_orders(train_names: list[str], probe_names: list[str], orders: str, seed
     from train.learning.sim_pool import cores
 
     keep_freed_memory()   # as in the runner (aesop_torch/malloc.py)
+    LAST.clear()
     prepared = _PREPARED.pop((len(train_names), orders, seed), None)
     order_t, trie = prepared or (order_tensor(len(train_names), orders, seed), None)
     out = run_population(train_names, probe_names, order_t, outcomes, probes, config, curves=True,
                          probe_process=cores() > 1, maps=maps, trie=trie)
     del out["final_probe_cm3"]
+    LAST.update(out)
     return out
 
 

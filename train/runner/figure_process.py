@@ -28,6 +28,20 @@ def _init(modules: tuple, orders: tuple | None) -> None:
         importlib.import_module(POPULATION).prepare_orders(*orders)
 
 
+POPULATION_FIGURE_KEYS = ("orders", "agree_fraction", "most_common_knowledge", "curves")
+
+
+def figure_of_the_population(runs, path, dpi: int, floor):
+    """Figure 2 with the population this process ran last (train.learning.population.LAST): asked for right after
+    the population, it is drawn as soon as the population is done, while the runner takes in the population's answer
+    and makes summary.json, instead of after the answer went to the runner and the figure's part of it came back."""
+    from train.learning.population import LAST
+    from train.runner.figures import save_figure2
+    if not LAST:
+        raise RuntimeError("no population has run in the figure process")
+    return save_figure2(runs, path, dpi, floor, {k: LAST[k] for k in POPULATION_FIGURE_KEYS})
+
+
 class Drawer:
     def __init__(self, population: tuple | None = None):
         """population: (n_objects, orders, seed) of the population the run will hand this process (its modules

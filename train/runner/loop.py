@@ -301,14 +301,14 @@ def _run(args, exp, objects, resumed, out, ckpt, saved, t0) -> int:
         for b, log in enumerate(logs):
             for i, r in enumerate(exp.trials[b]):
                 log.trial(i, r)
-    if population_job is not None:   # the figure process ran it beside the trials: its result, then Figure 2
+    if population_job is not None:   # the figure process runs it beside the trials: Figure 2 next there, its result
+        figure = _draw_population_figure(exp, out)
         with Step("population", None, "order", announce=False):
             try:
                 population = population_job.get()
             except WorkerDied as e:
                 raise WorkerDied("the figure process", e.pid, e.exitcode) from None
         print(f"population: done ({population['timing_s']['total']:.1f} s on the figure process)", flush=True)
-        figure = _draw_figure(exp, out, population)
     # summary.json's text is made while the figure process draws (9! orders: 8.7 MB, ~0.3 s), written last
     summary = build_summary(exp, population, config)
     text = summary_text(summary) + "\n"
@@ -373,6 +373,15 @@ def _draw_figure(exp, out, population):
                                 senses_floor(exp.probes),
                                 population and {k: population[k] for k in ("orders", "agree_fraction",
                                                                            "most_common_knowledge", "curves")})
+
+
+def _draw_population_figure(exp, out):
+    """Figure 2 with the population the figure process is running (_start_population), asked for now: drawn there
+    once the population is done, from its answer in that process (figure_process.figure_of_the_population)."""
+    from train.learning.experiment import senses_floor
+
+    return _OPEN["drawer"].draw("train.runner.figure_process:figure_of_the_population", exp.records,
+                                out / "figure2.png", 110, senses_floor(exp.probes))
 
 
 def _flat(prefix: str, d: dict) -> dict:
