@@ -46,7 +46,7 @@ from dataclasses import dataclass
 import torch
 from torch import nn
 
-from .names import PROPERTIES, STATES  # noqa: F401  (torch-free, aesop_torch/names.py)
+from .names import PROPERTIES, STATES  # torch-free (aesop_torch/names.py)
 
 RULE_NAMES = ("S", "E", "G", "U")  # codes 0..3 in `CausalRules.apply`'s output
 STATUS_QUO, ELIMINATION, GROWTH, UNCERTAINTY = range(4)

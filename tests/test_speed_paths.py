@@ -15,8 +15,8 @@ from train.learning.experiment import (
     order_tensor,
     stack_measurements,
 )
-from train.learning.sim_pool import Physics
 from train.learning.population import run_orders, run_population
+from train.learning.sim_pool import Physics
 
 THREE = ("red_heavy_cylinder", "red_light_cylinder", "green_heavy_box")
 
@@ -137,7 +137,10 @@ def test_orders_prepared_ahead_give_the_same_population_and_are_taken_once(world
 
 def test_figure_2_of_the_population_run_last_here_is_the_figure_of_its_answer(world, tmp_path, monkeypatch):
     from train.learning import population
-    from train.runner.figure_process import POPULATION_FIGURE_KEYS, figure_of_the_population
+    from train.runner.figure_process import (
+        POPULATION_FIGURE_KEYS,
+        figure_of_the_population,
+    )
     from train.runner.figures import save_figure2
     objs, outcomes, probes = world
     names, probe_names = list(THREE), [p.name for p in objs.probe]
@@ -168,6 +171,7 @@ def test_jobs_submitted_early_are_taken_up_by_the_same_jobs_submit():
 @pytest.mark.timeout(120)
 def test_workers_forked_with_the_world_built_once_simulate_what_a_world_built_here_does(monkeypatch):
     import multiprocessing
+
     import sim.world
     from train.learning import sim_pool
 

@@ -30,7 +30,7 @@ from train.common import exits  # noqa: E402
 
 if __name__ == "__main__":
     exits.early_signals()
-    from train.common.collector import imports_begin  # noqa: E402
+    from train.common.collector import imports_begin
     imports_begin()   # the collector off while torch and the rest are imported (train/common/collector.py)
 
 import argparse  # noqa: E402

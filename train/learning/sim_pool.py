@@ -18,8 +18,8 @@ pybullet and pytorch-kinematics before its first simulation, 4-5 s on a busy mac
 here: the one pybullet client the runner holds at the fork is that world's, a DIRECT one (in-process: no thread, no
 socket, no shared memory; a GUI simulates in-process, without workers), so each worker's copy is a world of its own
 (tests/test_speed_paths.py: the same outcomes as a world built in place); and a worker's torch runs on one thread
-(`_init_forked`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy on two threads and a tensorboard
-writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
+(`_init_forked`), so it never waits on a thread pool it did not inherit (checked with the parent's pool busy on two
+threads and a tensorboard writer thread alive at the fork: same outcomes, no hang). Elsewhere: spawn.
 
 Every world is built from the Physics' `world` config (sim.world.WorldConfig; None: the default). A world that
 cannot be built (a config the scene does not admit) fails every job with one WorldBuildError: raised by a pool's
@@ -314,7 +314,7 @@ class Physics:
         import numpy.ma  # noqa: F401  np.median's first call imports it (~0.06 s), once here rather than in each worker
         import torch
 
-        import sim.episode  # noqa: F401  a drop's and an inspection's code, likewise
+        import sim.episode  # a drop's and an inspection's code, likewise
         import sim.trial  # noqa: F401  a goal trial's
 
         threads = torch.get_num_threads()

@@ -24,7 +24,9 @@ ROOT = Path(__file__).resolve().parents[2]
 DEFAULT_OBJECTS = ROOT / "sim" / "default_objects.json"
 DEFAULT_ORDERS = "4"     # the paper's Figure 2: four random orders of the eight objects
 MAX_ORDERS = 1_000_000   # orders of one run; beyond this the orders alone fill gigabytes (8 ints each, as lists)
-FULL_RUNS = 64  # orders run in detail; more run as a population (64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320 would be ~300 MB)
+# orders run in detail, more as a population: 64 orders x 8 episodes of full records is ~0.5 MB of JSON; 40,320
+# would be ~300 MB
+FULL_RUNS = 64
 MAX_SEED = 2 ** 63       # torch.Generator.manual_seed takes a 64-bit integer; stored as int64 in tensors
 ORDERS_RE = re.compile(r"[1-9][0-9]{0,6}|listed|all", re.ASCII)
 SEED_RE = re.compile(r"[0-9]{1,19}", re.ASCII)
