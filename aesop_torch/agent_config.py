@@ -22,7 +22,8 @@ AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in rang
 
 MODELS = ("paper", "contextual", "extended")
 ABLATIONS = {"paper": ("rules", "gating"),
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally", "lived",
+                            "causes"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
