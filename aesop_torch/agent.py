@@ -84,7 +84,7 @@ class Anticipation:
     recalled_values: dict | None   # map name -> (B, K, dim) values each recalled episode retro-activates (or None)
     fates: torch.Tensor      # (B, K) long: 0 floated, 1 sank, -1 not seen or not valid
     by_fate: torch.Tensor    # (B, 2) what it would displace if it floats, if it sinks (NaN: no episode of that fate)
-    p_sink: torch.Tensor     # (B,) how likely it sinks, by the recalled fates; `expected` takes the likelier fate
+    p_sink: torch.Tensor     # (B,) how likely it sinks, by the fates lived or recalled; `expected` takes the likelier
 
 
 @dataclass
