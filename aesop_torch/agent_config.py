@@ -22,7 +22,8 @@ AGENT_ROW_K = tuple(1 if r in (ROW_REWARD, ROW_REWARD_FINE) else 2 for r in rang
 
 MODELS = ("paper", "contextual", "extended")
 ABLATIONS = {"paper": ("rules", "gating"),
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally", "lived",
+                            "causes"),
              "extended": ("rules", "gating", "prior")}
 # the parts a model is made of (AgentConfig.learning, .readout): the loop calls whichever it is given
 LEARNING = ("incremental", "contextual", "evidence")
@@ -187,7 +188,9 @@ class AgentConfig:
     # power (the average's recall_sharpness keeps the best few; a fit needs episodes that differ, so a wider
     # neighbourhood). Tuning seeds 1000..: see docs/model.md
     fit_sharpness: float = 4.0
-    # contextual: the fate's recall (the first of two) brings back at most this many episodes, strongest first. Its
+    # contextual, where the fate is read from a recall (the `lived` ablation, or episodes stored by `remember` alone;
+    # otherwise the fate's boundary is fitted over every episode lived and there is no such recall, agent.py
+    # `_lived_fates`): the fate's recall (the first of two) brings back at most this many episodes, strongest first. Its
     # fates vote weighted by recall strength to the power recall_sharpness, so an episode recalled at 0.8 of the
     # strongest counts 3 % of it, and the ones past the first few barely count; recall is most of an episode's time
     # (a whole recall settles the network once per episode it brings back)

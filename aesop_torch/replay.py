@@ -6,7 +6,8 @@ What is replayed: every episode lived, as the memory's capacity allows (`Context
 memory's max_episodes; when full, the oldest goes), not only the episodes the memory stored. What is stored depends on
 the order (an episode like a stored one that went the same way is not encoded, the paper's episode 2), so replaying the
 stored ones would bring the order back in. Each lived episode is kept as the robot perceived it: its properties'
-decoded values, its outcome as the memory holds it (through the reward code) and its fate.
+decoded values, its outcome as the memory holds it (through the reward code) and its fate. The expected fate is
+read from the same store: a boundary fitted over every episode lived (agent.py `_fate_lived`).
 
 Each pair is compared once, when its later episode is lived (`add_episode`: only the new episode's pairs are new),
 at full strength, and cached (DeltaProperty changed / unclear per property, the sign of each ordered property's change,

@@ -11,7 +11,9 @@ noise (`sim.sensor_model.SensorModel`): sets of 8 and of 24 train objects learne
 - contextual and its ablations (-rules, -gating, -context, -fit, -boundary: the expected fate by the recalled fates'
   vote instead of a fitted boundary, -replay: today's sequential rules instead of the knowledge re-derived from every
   pair lived, -signed: no signed consistency, -tally: replay's Elimination on any clean pair whose outcome held
-  instead of on a share of the property's clean pairs), and contextual +active: the robot chooses its next object
+  instead of on a share of the property's clean pairs, -lived: the fate's boundary fitted over the episodes the
+  fate's recall brings back instead of every episode lived, -causes: that boundary over every property live for the
+  fate instead of only those dominant in some context), and contextual +active: the robot chooses its next object
   (`explore = "active"`, aesop_torch/exploration.py) from the teacher's first;
 - extended, extended -rules, extended -prior (its readout without the physics priors);
 - on request (`--conditions`), paper +knowledge: the paper model with the right knowledge set by hand and its
@@ -83,6 +85,7 @@ MODELS = {"paper": ("paper", ()), "paper -rules": ("paper", ("rules",)), "paper 
           "contextual -fit": ("contextual", ("fit",)),
           "contextual -boundary": ("contextual", ("boundary",)), "contextual -replay": ("contextual", ("replay",)),
           "contextual -signed": ("contextual", ("signed",)), "contextual -tally": ("contextual", ("tally",)),
+          "contextual -lived": ("contextual", ("lived",)), "contextual -causes": ("contextual", ("causes",)),
           "contextual +active": ("contextual", ()), "contextual size=largest": ("contextual", ()),
           "extended": ("extended", ()), "extended -rules": ("extended", ("rules",)),
           "extended -prior": ("extended", ("prior",))}
@@ -411,10 +414,14 @@ def main():
         ctx["contextual_active_err_24"] = (err("24", "contextual +active", 24)
                                            if "contextual +active" in conditions and a.long_sets else "n/a")
         ctx["contextual_life_time_ratio"] = ratio_t
-        for c in ("contextual -context", "contextual -replay", "contextual -signed", "contextual -tally"):
+        for c in ("contextual -context", "contextual -replay", "contextual -signed", "contextual -tally",
+                  "contextual -lived", "contextual -causes"):
             if c in conditions:
                 line[c.replace(" -", "_") + "_off_ratio_230"] = ratio(
                     c, "contextual", "life", last)
+        for c in ("contextual -lived", "contextual -causes"):   # the fate's boundary: what it does after 24
+            if c in conditions and a.long_sets:
+                line[c.replace(" -", "_") + "_off_ratio_24"] = ratio(c, "contextual", "24", 24)
         line["contextual_right_knowledge_230"] = sum(right) / max(len(right), 1)
     if "extended" in conditions:
         line["extended_err_8"] = err("8", "extended", 8)

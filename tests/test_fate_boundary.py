@@ -6,6 +6,7 @@ import torch
 
 from aesop_torch import Agent, AgentConfig
 from aesop_torch.fate_boundary import expected_fate
+from aesop_torch.local_readout import property_columns
 
 RED = (0.85, 0.1, 0.1)
 
@@ -92,3 +93,70 @@ def test_a_contextual_config_from_before_the_boundary_keeps_the_vote_it_learned_
     paper = AgentConfig.paper().to_dict()
     del paper["fate_boundary_ridge"]
     assert AgentConfig.from_dict(paper).ablate == ()
+
+
+def drop(agent, m, cm3, sank):
+    return agent.step(m, torch.tensor([cm3]), torch.tensor([False]), torch.tensor([False]), sank=torch.tensor([sank]))
+
+
+@pytest.fixture(scope="module")
+def lived_agents():
+    """The contextual model with the boundary over every property live for the fate (`causes` ablated, so that the
+    columns do not depend on what the rules found here), its fate's recall bringing back one episode: fitted over
+    every episode lived, or (`lived` ablated) over the recalled one."""
+    return {ab: Agent(AgentConfig.contextual(seed=0, ablate=ab, fate_recalls=1))
+            for ab in (("causes",), ("causes", "lived"))}
+
+
+def _lived_boundary_sinks_the_heavier_cube(agents, ablate):
+    """The cubes of `_heavier_than_the_floater_it_recalls`, lived (dropped, not remembered): 3 cm 20 g floats, 60 g
+    sinks, 8 cm 300 g floats, 600 g sinks, 5 cm 100 g floats. A 5 cm cube of 170 g sinks (136 cm^3 of mass in 125
+    cm^3). Its one recalled episode is the 100 g floater, on the wrong side; the boundary over all five episodes
+    lived puts it on the sinking side."""
+    agent = agents[ablate].select([0])
+    for side, mass, sank in ((3.0, 20, False), (3.0, 60, True), (8.0, 300, False), (8.0, 600, True),
+                             (5.0, 100, False)):
+        drop(agent, cube(side, mass), float(min(mass, side ** 3)), sank)
+    assert int(agent.rules.lived_count[0]) == 5
+    a = agent.anticipate(cube(5.0, 170))
+    assert a.p_sink[0] > 0.5, a.p_sink
+
+
+def test_the_fate_is_fitted_over_every_episode_lived(lived_agents):
+    _lived_boundary_sinks_the_heavier_cube(lived_agents, ("causes",))
+    with pytest.raises(AssertionError):          # over the one episode its recall brings back: it floats
+        _lived_boundary_sinks_the_heavier_cube(lived_agents, ("causes", "lived"))
+
+
+@pytest.mark.parametrize("ablate", [(), ("causes",)])
+def test_the_boundary_is_fitted_over_the_properties_dominant_somewhere(ablate):
+    """Strengths set by hand (color fill elongation size weight; contexts floating, sinking, fate): weight dominant
+    among floaters, fill and size among sinkers, colour eliminated in both (irrelevant to the fate too), elongation
+    undecided. The boundary's columns: fill, size and weight (elongation, live but dominant nowhere, is left out);
+    with nothing dominant anywhere, every live property (all but colour); with `causes` ablated, always every live
+    one."""
+    agent = Agent(AgentConfig.contextual(seed=0, ablate=ablate), develop=False)
+    layout = {"color": 3, "fill": 1, "elongation": 2, "size": 1, "weight": 1}
+    values = {p: torch.zeros(1, d) for p, d in layout.items()}
+    x, cols = property_columns(values, agent.properties)
+
+    def columns_of():
+        got = agent._fate_columns(x, cols)[0]
+        return [p for p, c in zip(agent.properties, cols) if got[c].all()]
+    s = torch.ones(1, 3, 5)
+    s[0, :2, 0] = 0.05                                                # colour eliminated among floaters and sinkers
+    agent.rules.strength.copy_(s)
+    assert columns_of() == ["fill", "elongation", "size", "weight"]
+    s[0, 0, 4] = s[0, 1, 1] = s[0, 1, 3] = 3.0                      # weight; fill and size
+    agent.rules.strength.copy_(s)
+    assert columns_of() == (["fill", "size", "weight"] if not ablate else ["fill", "elongation", "size", "weight"])
+
+
+def test_with_the_rules_off_every_episode_lived_is_still_kept_and_nothing_derived():
+    """`rules` ablated: the knowledge stays unknown (strengths 1), and the lived store the fate is fitted over still
+    fills (the rules' ablation takes away what the rules learn, not the fate's examples)."""
+    agent = Agent(AgentConfig.contextual(seed=0, ablate=("rules",)))
+    drop(agent, cube(3.0, 20), 20.0, False)
+    drop(agent, cube(3.0, 60), 27.0, True)
+    assert int(agent.rules.lived_count[0]) == 2
+    assert torch.equal(agent.rules.strength, torch.ones_like(agent.rules.strength))

@@ -429,5 +429,5 @@ def test_the_example_in_docs_and_the_shipped_sweep_files_load():
               "benches/learning_curve.toml"):
         assert sweep_spec.load_sweep(ROOT / f)[1]
     _, cells = sweep_spec.load_sweep(ROOT / "benches" / "ablation.toml")
-    # paper and extended with their two ablations each (3 + 3); contextual, its eight ablations and +active (10)
-    assert len(cells) == 16 * (30 + 10 + 8)
+    # paper and extended with their two ablations each (3 + 3); contextual, its ten ablations and +active (12)
+    assert len(cells) == 18 * (30 + 10 + 8)

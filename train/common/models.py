@@ -7,7 +7,8 @@ from __future__ import annotations
 
 MODELS = ("paper", "contextual", "extended")                          # aesop_torch.agent.MODELS, without torch
 ABLATIONS = {"paper": ("rules", "gating"),                            # and .ABLATIONS
-             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally"),
+             "contextual": ("rules", "gating", "context", "fit", "boundary", "replay", "signed", "tally", "lived",
+                            "causes"),
              "extended": ("rules", "gating", "prior")}
 EXPLORE = ("teacher", "active")                                       # aesop_torch.exploration.EXPLORE
 # what each model and each part an ablation switches off is, for --help (train/run.py builds it from these tables
@@ -33,6 +34,10 @@ ABLATION_HELP = {
               "from every pair of episodes lived after each episode",
     "signed": "replay without signed consistency (Growth on a property whose change had the outcome's sign in every "
               "clear contradicted pair)",
+    "lived": "the expected fate's boundary fitted over the episodes a recall through the fate's knowledge brings "
+             "back (at most fate_recalls) instead of over every episode lived",
+    "causes": "the expected fate's boundary fitted over every property live for the fate instead of only those "
+              "dominant in some context",
     "tally": "replay's Elimination on any clean pair whose outcome held, instead of only where such pairs are at "
              "least elim_share of the property's clean pairs (held and moved)",
 }
