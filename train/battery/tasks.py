@@ -89,14 +89,15 @@ class Protocol:
     room: int = 64
     # trials of the project's conflict tasks (benches/battery.py CONFLICT and SIZE_WEIGHT): they are transfer probes,
     # measured on trial 1 (issue 46 point 4), not studies' tasks whose learning over 20 trials is compared with the
-    # animals'; 5 trials (Miller et al. 2017 gave children 5 trials per task) still show what a first trial's
+    # animals'; 5 trials (as Miller et al. 2017's children had per condition) still show what a first trial's
     # outcome does, at a quarter of the 20 trials' cost
     probe_trials: int = 5
     # most episodes one recall brings back for a battery subject (MemoryConfig.max_recalls; None: the model's own,
-    # unbounded). A bound for speed: unbounded, a test object's reward recall brought back ~39 episodes of a subject's
-    # ~128 (seeds 1000000-1000003), ~40 settles each, and recall was half the bench's time. What the bound changes
-    # on trial 1, measured on seeds 1000+ (never the bench's): BENCHMARKS.md, "The Aesop battery"; --max-recalls
-    # none is its ablation
+    # unbounded). An option for speed, off: unbounded, a test object's reward recall brought back ~39 episodes of an
+    # experienced subject's ~128 (seeds 1000000-1000003), and recall was about half the bench's CPU; bounded at 16
+    # a run of the conflict tasks took 0.68x the CPU, but trial 1 of the look conflicts fell with it (experienced subjects 0.98 ->
+    # 0.86 and 0.69 -> 0.44, seeds 1000000-1000005, BENCHMARKS.md "The Aesop battery"): the bound cuts what the
+    # model recalls, so it is not the model's battery
     max_recalls: int | None = None
 
 
