@@ -4,14 +4,16 @@ over naive ones on trial 1.
 
     python benches/battery.py [--subjects 20] [--first-seed 100] [--models contextual paper]
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
-                              [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
+                              [--trials 20] [--probe-trials 5] [--max-recalls N|none] [--jar-objects 64]
+                              [--workers 2] [--quick] [--out DIR] [--record]
 
 Per task (sim/tasks/<task>.json: the 8 studies' tasks and 8 conflict tasks of this project) and condition (model,
 rules on or off, kind), --subjects independent subjects (train/battery/tasks.py: each its own maps, perception noise,
 positions and choices from its own seed; naive and experienced subjects of one seed are the same animal before
 their histories differ, so conditions are compared paired). Naive subjects have the studies' pre-training, to a
 criterion; experienced ones a jar life of --jar-objects generated objects first. A trial is drops until the reward
-is in reach or the objects run out; the first drop of each trial is scored, and the softmax's expected P(correct)
+is in reach or the objects run out; a study's task has --trials trials, a conflict task (a transfer probe, measured on
+trial 1) --probe-trials; the first drop of each trial is scored, and the softmax's expected P(correct)
 on it is recorded (no single draws). The transfer model (MODEL) always runs with its rules off too.
 
 Printed per condition and task: trial 1 (the subjects' mean expected P(correct) [95 % t], n), the learning slope
@@ -243,10 +245,10 @@ def per_subject_trial1(merged, cond, tasks) -> dict:
     return {s: sum(v) / len(v) for s, v in out.items()}
 
 
-def table_block(merged, conds, tasks, last: str, n: int, command: str) -> str:
+def table_block(merged, conds, tasks, last: str, n: int, command: str, trials: str = "") -> str:
     """BENCHMARKS.md's battery table (between <!-- table:battery --> markers), from this run."""
     head = [label(*c) for c in conds]
-    lines = [f"`{command}` ({n} subjects per condition; trial 1: mean expected P(correct) of the first drop [95 % t]; "
+    lines = [f"`{command}` ({n} subjects per condition{trials}; trial 1: mean expected P(correct) of the first drop [95 % t]; "
              "slope per trial, conditional logit [95 % likelihood-ratio]; L: learned by the project's rule):", "",
              "| task | " + " | ".join(head) + " |", "| --- |" + " --- |" * len(head)]
     for t in tasks:
@@ -487,7 +489,8 @@ def main(argv=None) -> None:
             f"crows_agreement={agree}/{both} pass_everything_agreement={every}/{both} subjects={n}")
     if a.record:
         command = "python " + " ".join(["benches/battery.py", *sys.argv[1:]])
-        write_table_block(table_block(merged, conds, tasks, last, n, command))
+        write_table_block(table_block(merged, conds, tasks, last, n, command,
+                                      f", {a.trials} trials per study's task, {probe} per conflict task"))
         write_table_block(readme_block(merged, M, conflict, last, n, command), README)
     print(last)
 
