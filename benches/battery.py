@@ -63,6 +63,7 @@ CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_l
 SIZE_WEIGHT = ("floater_large_light_vs_sinker_small_heavy", "floaters_large_light_vs_small_heavy",
                "sinker_small_vs_floater_large_light")
 ALL_TASKS = TASKS + CONFLICT + SIZE_WEIGHT
+KINDS_ALL = ("naive", "experienced")
 PNG = ROOT / "benches" / "battery_curves.png"
 BENCHMARKS = ROOT / "BENCHMARKS.md"   # its battery section holds the table (<!-- table:battery -->)
 README = ROOT / "README.md"           # its battery section holds the transfer summary (<!-- table:battery -->)
@@ -335,6 +336,10 @@ def main(argv=None) -> None:
                      a.max_recalls != Protocol.max_recalls):
         ap.exit(2, "battery: --quick, --trials, --probe-trials and --max-recalls are for smoke tests and ablations, "
                    "not recorded (drop --record)\n")
+    if a.record and (a.subjects < 20 or a.models != [MODEL, "paper"] or sorted(a.kinds) != sorted(KINDS_ALL) or
+                     set(a.tasks) != set(ALL_TASKS) or a.jar_objects != Protocol.jar_objects or a.aim != "gap"):
+        ap.exit(2, "battery: --record records the full configuration only (every task, both models and kinds, the "
+                   "default jar life and aim, >= 20 subjects); drop --record for a partial run\n")
     from aesop_torch.agent_config import MODELS
     bad = [m for m in a.models if m not in MODELS]
     if bad:

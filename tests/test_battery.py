@@ -412,3 +412,13 @@ def test_the_readme_block_is_the_conflict_tasks_trial_1_and_gains():
     assert cells[4].startswith("0.30 ") and cells[5] == "-0.10 [-0.10, -0.10]"
     assert text.endswith("Last line: `LAST`")
     assert "<!-- table:battery -->" in (ROOT / "README.md").read_text()
+
+
+def test_record_refuses_a_partial_configuration(tmp_path):
+    """--record writes the README's and BENCHMARKS' battery blocks from the full configuration only: a partial one
+    (here a short jar life) is refused in one line before any work, nothing written."""
+    before = (ROOT / "BENCHMARKS.md").read_text(), (ROOT / "README.md").read_text()
+    r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--record", "--jar-objects", "6"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "full configuration" in r.stderr
+    assert ((ROOT / "BENCHMARKS.md").read_text(), (ROOT / "README.md").read_text()) == before
