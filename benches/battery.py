@@ -4,14 +4,16 @@ over naive ones on trial 1.
 
     python benches/battery.py [--subjects 20] [--first-seed 100] [--models contextual paper]
                               [--kinds naive experienced] [--tasks T ...] [--ablate rules] [--aim gap|rise]
-                              [--trials 20] [--jar-objects 64] [--workers 2] [--quick] [--out DIR] [--record]
+                              [--trials 20] [--probe-trials 5] [--max-recalls N|none] [--jar-objects 64]
+                              [--workers 2] [--quick] [--out DIR] [--record]
 
 Per task (sim/tasks/<task>.json: the 8 studies' tasks and 8 conflict tasks of this project) and condition (model,
 rules on or off, kind), --subjects independent subjects (train/battery/tasks.py: each its own maps, perception noise,
 positions and choices from its own seed; naive and experienced subjects of one seed are the same animal before
 their histories differ, so conditions are compared paired). Naive subjects have the studies' pre-training, to a
 criterion; experienced ones a jar life of --jar-objects generated objects first. A trial is drops until the reward
-is in reach or the objects run out; the first drop of each trial is scored, and the softmax's expected P(correct)
+is in reach or the objects run out; a study's task has --trials trials, a conflict task (a transfer probe, measured on
+trial 1) --probe-trials; the first drop of each trial is scored, and the softmax's expected P(correct)
 on it is recorded (no single draws). The transfer model (MODEL) always runs with its rules off too.
 
 Printed per condition and task: trial 1 (the subjects' mean expected P(correct) [95 % t], n), the learning slope
@@ -20,7 +22,7 @@ adjusted one-sided p over the tasks, learned (the project's rule: trial 1 not ab
 the subjects passing their own binomial test, the share of functional drops and drops per trial. Then the transfer
 gains (paired, experienced - naive, expected P(correct) on trial 1), the crows' pattern beside a pass-everything
 model's, and the animals' results. With --record the output goes to BENCHMARKS.md (its block `battery`) and the
-battery section's table there is rewritten from it; the learning curves go to benches/battery_curves.png. The last line:
+battery section's table there and the README's battery block are rewritten from it; the learning curves go to benches/battery_curves.png. The last line:
 `transfer_gain_<M>=G [lo, hi] transfer_gain_<M>_rules_off=G [lo, hi] conflict_trial1_experienced=
 conflict_trial1_experienced_rules_off= conflict_trial1_naive= learned_tasks_naive_<M>=K/8 crows_agreement=K/6
 pass_everything_agreement=K/6 subjects=N`. The protocol's numbers were chosen on seeds 1000 and up, never the
@@ -61,8 +63,10 @@ CONFLICT = ("conflict_sinking_vs_floating", "conflict_solid_vs_hollow", "large_l
 SIZE_WEIGHT = ("floater_large_light_vs_sinker_small_heavy", "floaters_large_light_vs_small_heavy",
                "sinker_small_vs_floater_large_light")
 ALL_TASKS = TASKS + CONFLICT + SIZE_WEIGHT
+KINDS_ALL = ("naive", "experienced")
 PNG = ROOT / "benches" / "battery_curves.png"
 BENCHMARKS = ROOT / "BENCHMARKS.md"   # its battery section holds the table (<!-- table:battery -->)
+README = ROOT / "README.md"           # its battery section holds the transfer summary (<!-- table:battery -->)
 
 JELBERT = "Jelbert et al. 2014, PLoS ONE 9:e92895"
 LOGAN = "Logan et al. 2014, PLoS ONE 9:e103049"
@@ -107,6 +111,13 @@ NOTES = (f"jays: 2 of the 5 birds of {JAYS} took part in these tasks (a result o
          "and the learned rule are this project's own, not a study's.")
 
 
+def recalls(text: str):
+    """--max-recalls: a positive int, or none (unbounded)."""
+    if text.lower() == "none":
+        return None
+    return count(text)
+
+
 def conditions(models, kinds, ablate_all: bool) -> list[tuple]:
     """(model, ablate, kind) to run: every model with its rules for every kind; the transfer model's (or with
     --ablate rules every model's) experienced subjects with their rules off too (their gain is taken over the naive
@@ -126,14 +137,15 @@ def _job(args):
     torch.set_num_threads(1)
     from sim.apparatus import load_task
     from train.battery.tasks import Protocol, make_subjects, run_task
-    conds, seeds, task_names, aim, jar_objects, trials = args
-    protocol = Protocol(jar_objects=jar_objects, trials=trials)
+    conds, seeds, task_names, aim, jar_objects, trials, probe_trials, max_recalls = args
+    protocol = Protocol(jar_objects=jar_objects, trials=trials, probe_trials=probe_trials, max_recalls=max_recalls)
     tasks = {t: load_task(ROOT / "sim" / "tasks" / f"{t}.json") for t in task_names}
     out = {}
     for model, ablate, kind in conds:
         subj = make_subjects(model, kind, 0, len(seeds), ablate, protocol, seeds=seeds)
         for t, task in tasks.items():
-            r = run_task(task, model, [0], len(seeds), ablate, aim=aim, kind=kind, protocol=protocol,
+            n = protocol.probe_trials if t in CONFLICT + SIZE_WEIGHT else protocol.trials
+            r = run_task(task, model, [0], len(seeds), ablate, trials=n, aim=aim, kind=kind, protocol=protocol,
                          ready={0: subj})
             r["peeks"] = peeks(r["log"], task)
             del r["log"], r["scores"]
@@ -234,10 +246,10 @@ def per_subject_trial1(merged, cond, tasks) -> dict:
     return {s: sum(v) / len(v) for s, v in out.items()}
 
 
-def table_block(merged, conds, tasks, last: str, n: int, command: str) -> str:
+def table_block(merged, conds, tasks, last: str, n: int, command: str, trials: str = "") -> str:
     """BENCHMARKS.md's battery table (between <!-- table:battery --> markers), from this run."""
     head = [label(*c) for c in conds]
-    lines = [f"`{command}` ({n} subjects per condition; trial 1: mean expected P(correct) of the first drop [95 % t]; "
+    lines = [f"`{command}` ({n} subjects per condition{trials}; trial 1: mean expected P(correct) of the first drop [95 % t]; "
              "slope per trial, conditional logit [95 % likelihood-ratio]; L: learned by the project's rule):", "",
              "| task | " + " | ".join(head) + " |", "| --- |" + " --- |" * len(head)]
     for t in tasks:
@@ -246,6 +258,29 @@ def table_block(merged, conds, tasks, last: str, n: int, command: str) -> str:
             r = merged[(*c, t)]
             cells.append(f"{interval(r['t1'])} / {slope_text(r['cslope'])}{' / L' if r.get('learned') else ''}")
         lines.append(f"| {t.replace('_', ' ')} | " + " | ".join(cells) + " |")
+    lines += ["", f"Last line: `{last}`"]
+    return "\n".join(lines)
+
+
+def readme_block(merged, model: str, conflict, last: str, n: int, command: str) -> str:
+    """README.md's battery block (between <!-- table:battery --> markers): the last line's conflict tasks, trial 1
+    per condition and the paired gains, and the last line, from this run."""
+    from train.battery.analysis import paired_gain
+    naive, exp, off = (model, (), "naive"), (model, (), "experienced"), (model, ("rules",), "experienced")
+    lines = [f"`{command}` ({n} subjects per condition; trial 1 of the conflict tasks, where the jar life is "
+             f"necessary: the mean expected P(correct) of the {model} model's first drop [95 % t], gains paired by "
+             f"subject; every task, the learning slopes and the crows' pattern: "
+             f"[BENCHMARKS.md](BENCHMARKS.md#the-aesop-battery)):", "",
+             "| task | naive | experienced | experienced, rules off | gain | gain, rules off |",
+             "| --- | --- | --- | --- | --- | --- |"]
+    for t in conflict:
+        if not all((*c, t) in merged for c in (naive, exp, off)):
+            continue
+        gains = [paired_gain(per_subject_trial1(merged, c, [t]), per_subject_trial1(merged, naive, [t]))
+                 for c in (exp, off)]
+        lines.append(f"| {t.replace('_', ' ')} | " + " | ".join(interval(merged[(*c, t)]["t1"]) for c in
+                                                                (naive, exp, off))
+                     + " | " + " | ".join(interval(g) for g in gains) + " |")
     lines += ["", f"Last line: `{last}`"]
     return "\n".join(lines)
 
@@ -265,6 +300,7 @@ def write_table_block(text: str, path: Path = BENCHMARKS) -> None:
 
 
 def main(argv=None) -> None:
+    from train.battery.tasks import Protocol
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--subjects", type=count, default=20, help="independent subjects per condition (each its own "
                                                                "seed: first-seed * 1000 + i)")
@@ -281,16 +317,29 @@ def main(argv=None) -> None:
                          "the gap unseen, its ablation)")
     ap.add_argument("--trials", type=at_least(2), default=20,
                     help="trials per task (the studies' 20; fewer only for a smoke test)")
+    ap.add_argument("--probe-trials", type=at_least(2), default=Protocol.probe_trials,
+                    help=f"trials per conflict task (transfer probes, measured on trial 1; default "
+                         f"{Protocol.probe_trials}, train/battery/tasks.py Protocol.probe_trials)")
+    ap.add_argument("--max-recalls", type=recalls, default=Protocol.max_recalls,
+                    help=f"most episodes a subject's recall brings back (default {Protocol.max_recalls}, "
+                         f"Protocol.max_recalls; none: the model's own, unbounded: its ablation)")
     ap.add_argument("--jar-objects", type=at_least(6), default=64, help="the experienced subjects' jar life")
     ap.add_argument("--workers", type=count, default=2, help="processes")
     ap.add_argument("--quick", action="store_true",
                     help="a smoke test: 2 subjects, the transfer model alone, 8 jar objects")
     ap.add_argument("--out", type=Path, default=Path("/tmp/battery"), help="where the learning curves' PNG goes "
                                                                            "(without --record)")
-    record_flag(ap, "BENCHMARKS.md: the bench's block and the battery section's table")
+    record_flag(ap, "BENCHMARKS.md: the bench's block and the battery section's table; README.md: its battery "
+                    "block")
     a = ap.parse_args(argv)
-    if a.record and (a.quick or a.trials != 20):
-        ap.exit(2, "battery: --quick and --trials are for smoke tests, not recorded (drop --record)\n")
+    if a.record and (a.quick or a.trials != 20 or a.probe_trials != Protocol.probe_trials or
+                     a.max_recalls != Protocol.max_recalls):
+        ap.exit(2, "battery: --quick, --trials, --probe-trials and --max-recalls are for smoke tests and ablations, "
+                   "not recorded (drop --record)\n")
+    if a.record and (a.subjects < 20 or a.models != [MODEL, "paper"] or sorted(a.kinds) != sorted(KINDS_ALL) or
+                     set(a.tasks) != set(ALL_TASKS) or a.jar_objects != Protocol.jar_objects or a.aim != "gap"):
+        ap.exit(2, "battery: --record records the full configuration only (every task, both models and kinds, the "
+                   "default jar life and aim, >= 20 subjects); drop --record for a partial run\n")
     from aesop_torch.agent_config import MODELS
     bad = [m for m in a.models if m not in MODELS]
     if bad:
@@ -315,7 +364,8 @@ def main(argv=None) -> None:
     seeds = [a.first_seed * 1000 + b for b in range(a.subjects)]
     conds = conditions(a.models, a.kinds, bool(a.ablate))
     chunks = [c for c in (seeds[i::a.workers] for i in range(a.workers)) if c]
-    jobs = [(conds, c, tasks, a.aim, a.jar_objects, a.trials) for c in chunks]
+    probe = min(a.probe_trials, a.trials)
+    jobs = [(conds, c, tasks, a.aim, a.jar_objects, a.trials, probe, a.max_recalls) for c in chunks]
     if a.workers > 1 and len(jobs) > 1:
         from train.learning.sim_pool import end_pool, quiet_pool   # workers ignore Ctrl-C, die with this process
         pool = quiet_pool(len(jobs), None, what="a battery worker")
@@ -339,9 +389,11 @@ def main(argv=None) -> None:
     n = a.subjects
     aim = "" if a.aim == "gap" else " (--aim rise: rise alone)"
     print(f"Aesop battery: {n} independent subjects per condition (seeds {seeds[0]}-{seeds[-1]}, each its own maps, "
-          f"noise, positions and draws; conditions paired by seed), {a.trials} trials per task, a trial drops until "
+          f"noise, positions and draws; conditions paired by seed), {a.trials} trials per studies' task and {probe} "
+          f"per conflict task (a transfer probe), a trial drops until "
           f"the reward is in reach or the objects run out, a softmax over (predicted rise - the reward's gap){aim}; "
-          f"experienced: a jar life of {a.jar_objects} objects first")
+          f"experienced: a jar life of {a.jar_objects} objects first; recall brings back at most "
+          f"{a.max_recalls if a.max_recalls is not None else 'every'} episode(s)")
     print("t1: the subjects' mean expected P(correct) of the first drop of trial 1 [95 % t]; slope: per trial, "
           "conditional logit [95 % likelihood-ratio]; holm p: one-sided, over the tasks; L: learned (the project's "
           "rule: t1 not above chance, holm p < 0.05); pass: subjects passing their own binomial test (the project's "
@@ -441,8 +493,10 @@ def main(argv=None) -> None:
             f"conflict_trial1_naive={val(t1((), 'naive', conflict))} learned_tasks_naive_{M}={learned} "
             f"crows_agreement={agree}/{both} pass_everything_agreement={every}/{both} subjects={n}")
     if a.record:
-        write_table_block(table_block(merged, conds, tasks, last, n, "python " + " ".join(
-            ["benches/battery.py", *sys.argv[1:]])))
+        command = "python " + " ".join(["benches/battery.py", *sys.argv[1:]])
+        write_table_block(table_block(merged, conds, tasks, last, n, command,
+                                      f", {a.trials} trials per study's task, {probe} per conflict task"))
+        write_table_block(readme_block(merged, M, conflict, last, n, command), README)
     print(last)
 
 

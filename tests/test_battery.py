@@ -328,3 +328,97 @@ def test_bench_refuses_an_unknown_model_in_one_line(tmp_path):
                         str(tmp_path)], capture_output=True, text=True, cwd=ROOT, timeout=60)
     assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "oracle" in r.stderr
     assert not list(tmp_path.iterdir())
+
+
+def test_the_chosen_options_anticipation_is_the_steps_own():
+    """play anticipates every option in one batch of subject copies and hands the chosen row to Agent.step
+    (OwnMapsAgent.give): the row equals what step would recompute from the same activities and state, bit for bit;
+    a given anticipation is used once, and only for exactly its activities."""
+    from train.battery.subject_maps import OwnMapsAgent, rows_of
+    agent = OwnMapsAgent.of_seeds(make_config("contextual", seed=7, extra=0), [7, 8])
+    no = torch.zeros(2, dtype=torch.bool)
+    lives = [battery.jar_world(7, 6), battery.jar_world(8, 6)]
+    for t in range(6):
+        ep = [life[t] for life in lives]
+        agent.step(battery.stack([e[0] for e in ep]), torch.tensor([e[1] for e in ep]), no,
+                   torch.tensor([e[2] for e in ep]), sank=torch.tensor([e[3] for e in ep]))
+    m = battery.stack([lives[0][0][0], lives[0][3][0], lives[1][1][0], lives[1][4][0]])
+    view = agent.select([0, 0, 1, 1])
+    ant = view.anticipate_acts(*view.activities(m))
+    given = rows_of(ant, [1, 2])
+    fresh = agent.anticipate_acts(given.acts, given.present)
+    for f in ("expected", "rewards", "fates", "by_fate", "p_sink"):
+        assert torch.equal(torch.nan_to_num(getattr(fresh, f), 99.0), torch.nan_to_num(getattr(given, f), 99.0)), f
+    assert torch.equal(fresh.recall.episodes, given.recall.episodes)
+    assert torch.equal(fresh.recall.strength, given.recall.strength)
+    assert all(torch.equal(fresh.values[k], given.values[k]) for k in fresh.values)
+    agent.give(given)
+    assert agent.anticipate_acts(given.acts, given.present) is given
+    assert agent.anticipate_acts(given.acts, given.present) is not given        # once
+    agent.give(given)
+    assert agent.anticipate_acts(given.acts + 1e-3, given.present) is not given  # other activities: recalled
+
+
+def test_play_reusing_the_chosen_anticipation_is_play_recomputing_it(monkeypatch):
+    """The reuse changes nothing: the same subjects play the same trials with Agent.step recalling again (give a
+    no-op) and get the same expected P(correct) and choices, bit for bit."""
+    from train.battery.subject_maps import OwnMapsAgent
+    task = load_task(TASKS / "conflict_sinking_vs_floating.json")
+    s = make_subjects("contextual", "experienced", 2, 2, protocol=SMALL)
+    r = play(s.select(), task, trials=2, protocol=SMALL)
+    monkeypatch.setattr(OwnMapsAgent, "give", lambda self, a: None)
+    again = play(s.select(), task, trials=2, protocol=SMALL)
+    assert r["p_right"] == again["p_right"] and r["choices"] == again["choices"]
+
+
+def test_a_battery_subjects_recall_is_bounded_by_the_protocol():
+    """Protocol.max_recalls bounds every recall of a battery subject (the models' own is unbounded); None leaves the
+    model's."""
+    from dataclasses import replace
+    s = make_subjects("contextual", "experienced", 1, 1, protocol=replace(SMALL, max_recalls=3))
+    assert s.agent.config.memory.max_recalls == 3
+    m = battery.stack([battery.jar_world(1000, 6)[0][0]])
+    assert int(s.agent.anticipate(m).recall.valid.sum()) == 3
+    free = make_subjects("contextual", "experienced", 1, 1, protocol=replace(SMALL, max_recalls=None))
+    assert free.agent.config.memory.max_recalls is None
+    assert int(free.agent.anticipate(m).recall.valid.sum()) > 3                 # unbounded, it brings back more
+    assert battery.AgentConfig.named("contextual").memory.max_recalls is None
+
+
+def test_conflict_tasks_run_the_probe_trials():
+    """The bench runs Protocol.trials trials of a study's task and probe_trials of a conflict task (a transfer
+    probe)."""
+    bench = bench_module()
+    out = bench._job(([("paper", (), "naive")], [5], ["sinking_vs_floating", "large_light_vs_small_heavy"], "gap", 6,
+                      3, 2, 16))
+    assert [len(r) for r in out[("paper", (), "naive", "sinking_vs_floating")]["right"]] == [3]
+    assert [len(r) for r in out[("paper", (), "naive", "large_light_vs_small_heavy")]["right"]] == [2]
+
+
+def test_the_readme_block_is_the_conflict_tasks_trial_1_and_gains():
+    """README.md's battery block: per conflict task trial 1 of each condition and the paired gains (by hand: two
+    subjects, experienced - naive = 0.4 and 0.2, mean 0.30; rules off - naive = -0.1 twice)."""
+    bench = bench_module()
+    t, M = "large_light_vs_small_heavy", "contextual"
+    t1 = {"naive": [0.5, 0.7], "experienced": [0.9, 0.9], "off": [0.4, 0.6]}
+    from train.battery.analysis import mean_interval
+    merged = {}
+    for key, ab, kind in (("naive", (), "naive"), ("experienced", (), "experienced"), ("off", ("rules",), "experienced")):
+        merged[(M, ab, kind, t)] = {"t1": mean_interval(t1[key]), "seeds": [1, 2], "p_right": [[p] for p in t1[key]]}
+    text = bench.readme_block(merged, M, [t], "LAST", 2, "python benches/battery.py")
+    row = [x for x in text.splitlines() if x.startswith("| large light")][0]
+    cells = [c.strip() for c in row.strip("|").split("|")]
+    assert cells[1].startswith("0.60 ") and cells[2].startswith("0.90 ") and cells[3].startswith("0.50 ")
+    assert cells[4].startswith("0.30 ") and cells[5] == "-0.10 [-0.10, -0.10]"
+    assert text.endswith("Last line: `LAST`")
+    assert "<!-- table:battery -->" in (ROOT / "README.md").read_text()
+
+
+def test_record_refuses_a_partial_configuration(tmp_path):
+    """--record writes the README's and BENCHMARKS' battery blocks from the full configuration only: a partial one
+    (here a short jar life) is refused in one line before any work, nothing written."""
+    before = (ROOT / "BENCHMARKS.md").read_text(), (ROOT / "README.md").read_text()
+    r = subprocess.run([sys.executable, str(ROOT / "benches" / "battery.py"), "--record", "--jar-objects", "6"],
+                       capture_output=True, text=True, cwd=ROOT, timeout=60)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1 and "full configuration" in r.stderr
+    assert ((ROOT / "BENCHMARKS.md").read_text(), (ROOT / "README.md").read_text()) == before

@@ -6,14 +6,20 @@ animal of its own, so its maps are its own: `OwnMapsAgent` keeps one map set per
 set it perceives through (`rows`); `activities` and `decode` run each set on its own rows. Everything else (recall,
 comparisons, rules, storing) is the Agent's, row by row as always. `select` keeps the subclass and the rows, so a
 view of several copies of a subject (one per option) still perceives through that subject's maps.
+
+`give` hands the agent the anticipation it has just made of what it will drop (the battery's choice anticipates every
+option; the chosen one's row is what `Agent.step` would recompute from the same map activities and the same learned
+state): its next `anticipate_acts` with exactly those activities returns it instead of recalling again.
 """
 
 from __future__ import annotations
 
+from dataclasses import fields
+
 import torch
 from torch import nn
 
-from aesop_torch.agent import Agent
+from aesop_torch.agent import Agent, Anticipation
 from aesop_torch.agent_config import AgentConfig
 from aesop_torch.encoders import train_property_maps
 from aesop_torch.hub import ObjectHub
@@ -108,6 +114,18 @@ class OwnMapsAgent(Agent):
                 out[b, ks] = torch.einsum("ka,apu->kpu", c[:, used], hub.branches[b, used])
         return out
 
+    def give(self, anticipation: Anticipation) -> None:
+        """The next anticipate_acts, if asked with exactly anticipation.acts and .present (and decoded), returns it:
+        the caller made it from these activities with this learned state (rows_of of a batch of option copies), so
+        recalling again would give it anew (recall, readout and rules are row by row). Used once, then dropped."""
+        self._given = anticipation
+
+    def anticipate_acts(self, acts: torch.Tensor, present: torch.Tensor, decoded: bool = True) -> Anticipation:
+        given, self._given = getattr(self, "_given", None), None
+        if given is not None and decoded and torch.equal(acts, given.acts) and torch.equal(present, given.present):
+            return given
+        return Agent.anticipate_acts(self, acts, present, decoded)
+
     def select(self, index) -> "OwnMapsAgent":
         new = Agent.select(self, index)
         new.__class__ = OwnMapsAgent
@@ -134,3 +152,18 @@ def batched_decode(a: torch.Tensor, W: torch.Tensor, sigma: float, floor: float 
     ok = on.sum(-1) > D
     x = torch.linalg.solve(A, b)[..., :D].to(a.dtype) if ok.any() else mean
     return torch.where(ok[..., None], x, mean)
+
+
+def rows_of(a: Anticipation, idx) -> Anticipation:
+    """The anticipation of rows idx (each field's leading dim indexed; values and recalled values per map)."""
+    idx = torch.as_tensor(idx)
+
+    def pick(v):
+        if v is None:
+            return None
+        if isinstance(v, dict):
+            return {k: pick(x) for k, x in v.items()}
+        if isinstance(v, tuple):   # memory.Recall
+            return type(v)(*(pick(x) for x in v))
+        return v[idx]
+    return Anticipation(**{f.name: pick(getattr(a, f.name)) for f in fields(a)})

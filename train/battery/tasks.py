@@ -87,6 +87,18 @@ class Protocol:
     # room in a subject's memory and hub past its jar life (make_subjects): its pre-training and one task's new
     # episodes (a drop like an earlier one, with the same outcome, is not stored again); past it the oldest go
     room: int = 64
+    # trials of the project's conflict tasks (benches/battery.py CONFLICT and SIZE_WEIGHT): they are transfer probes,
+    # measured on trial 1 (issue 46 point 4), not studies' tasks whose learning over 20 trials is compared with the
+    # animals'; 5 trials (as Miller et al. 2017's children had per condition) still show what a first trial's
+    # outcome does, at a quarter of the 20 trials' cost
+    probe_trials: int = 5
+    # most episodes one recall brings back for a battery subject (MemoryConfig.max_recalls; None: the model's own,
+    # unbounded). An option for speed, off: unbounded, a test object's reward recall brought back ~39 episodes of an
+    # experienced subject's ~128 (seeds 1000000-1000003), and recall was about half the bench's CPU; bounded at 16
+    # a run of the conflict tasks took 0.68x the CPU, but trial 1 of the look conflicts fell with it (experienced subjects 0.98 ->
+    # 0.86 and 0.69 -> 0.44, seeds 1000000-1000005, BENCHMARKS.md "The Aesop battery"): the bound cuts what the
+    # model recalls, so it is not the model's battery
+    max_recalls: int | None = None
 
 
 # Pre-training (the studies': stones dropped into a single tube of water): three stones of a few sizes, rough grey-
@@ -319,7 +331,10 @@ def make_subjects(model: str, kind: str, seed: int, subjects: int, ablate: tuple
     # episodes; a repeated drop with the same outcome is not stored again), the oldest forgotten past that: recall's
     # cost grows with their size, and the default's 230 is sized for a jar life of 230 objects
     size = (protocol.jar_objects if kind == "experienced" else 0) + protocol.room
-    config = replace(config, memory=replace(config.memory, max_episodes=size),
+    cap = config.memory.max_recalls
+    if protocol.max_recalls is not None:
+        cap = protocol.max_recalls if cap is None else min(cap, protocol.max_recalls)
+    config = replace(config, memory=replace(config.memory, max_episodes=size, max_recalls=cap),
                      hub=replace(config.hub, max_assemblies=size))
     agent = OwnMapsAgent.of_seeds(config, seeds)
     s = Subjects(agent, seeds, kind, [[] for _ in seeds], [None] * len(seeds))
@@ -430,6 +445,7 @@ def play(subjects: Subjects, task, trials: int = TRIALS, protocol: Protocol = Pr
     if outcome is None:
         from sim.apparatus import outcome
     from sim.sensor_model import SensorModel
+    from train.battery.subject_maps import rows_of
     sensor = SensorModel()
     agent = subjects.agent
     B = agent.batch
@@ -463,7 +479,13 @@ def play(subjects: Subjects, task, trials: int = TRIALS, protocol: Protocol = Pr
                 for tb, o in opts:
                     rows.append(b)
                     meas.append((look or perceive_option)(layout[b], tb, seen[o.name], levels[b]))
-            expected = agent.select(rows).predict(stack(meas))
+            view = agent.select(rows)
+            reuse = hasattr(agent, "give")   # train/battery/subject_maps.py: the chosen row's anticipation reused
+            if reuse:
+                ant = view.anticipate_acts(*view.activities(stack(meas)))
+                expected = ant.expected
+            else:
+                expected = view.predict(stack(meas))
             at, pick = 0, {}
             for b in opts_of:
                 n = len(opts_of[b])
@@ -475,13 +497,13 @@ def play(subjects: Subjects, task, trials: int = TRIALS, protocol: Protocol = Pr
                 if d == 0:
                     out["p_right"][b].append(sum(p for p, g in zip(probs, good) if g))
                     out["right"][b].append(good[i])
-                pick[b] = (opts_of[b][i], meas[at + i], good[i])
+                pick[b] = (opts_of[b][i], meas[at + i], good[i], at + i)
                 at += n
             # every subject steps (the Agent's batch); those without a drop take part with learn False
             ms, rises, before, after, sank, learn = [], [], [], [], [], []
             for b in range(B):
                 if b in pick:
-                    (tb, o), m, good = pick[b]
+                    (tb, o), m, good, _ = pick[b]
                     r = outcome(task, levels[b], task.tube(tb.name), o)
                     levels[b] = {k: float(v) for k, v in r["levels"].items()}
                     left[b][o.name] -= 1
@@ -500,8 +522,16 @@ def play(subjects: Subjects, task, trials: int = TRIALS, protocol: Protocol = Pr
                     after.append(False)
                     sank.append(True)
                     learn.append(False)
+            perceived = None
+            if reuse:
+                # the step's anticipation is the chosen option's row of the one just made (its activities too: the
+                # option was perceived once); a subject without a drop takes any picked row's (it learns nothing)
+                some = next(iter(pick.values()))[3]
+                given = rows_of(ant, [pick[b][3] if b in pick else some for b in range(B)])
+                agent.give(given)
+                perceived = (given.acts, given.present)
             agent.step(stack(ms), torch.tensor(rises), torch.tensor(before), torch.tensor(after),
-                       learn=torch.tensor(learn), sank=seen_fates(sank))
+                       learn=torch.tensor(learn), sank=seen_fates(sank), perceived=perceived)
             for b in pick:
                 if after[b]:
                     reached[b] = True
