@@ -204,6 +204,34 @@ def test_a_pool_whose_dead_process_the_pool_thread_saw_still_ends():
     assert all(p.exitcode is not None for p in pool.processes)
 
 
+
+def _half_a_result():
+    """A pool job that writes the start of a 1 MB result into the pool's result pipe, as a process killed while it
+    sent one leaves it, and waits."""
+    import struct
+    import time
+    outqueue = sys._getframe(1).f_locals["outqueue"]   # Pool's worker(), which called this job
+    os.write(outqueue._writer.fileno(), struct.pack("!i", 1 << 20) + b"x" * 100)
+    time.sleep(60)
+
+
+def test_a_pool_ends_when_a_killed_process_left_half_a_result():
+    # the result thread waits for the rest of what it reads; the sentinel Pool.terminate sends became part of it and
+    # Pool's join waited for ever: a runner sent SIGTERM 0.3 s into its goal trials hung after its one line
+    import threading
+    import time
+
+    from train.learning.sim_pool import end_pool, quiet_pool
+    pool = quiet_pool(1, None, what="a test worker")
+    pool.apply_async(_half_a_result)
+    time.sleep(1.0)   # the half result written, the pool's result thread reading it
+    ender = threading.Thread(target=end_pool, args=(pool,), daemon=True)
+    started = time.monotonic()
+    ender.start()
+    ender.join(20)
+    assert not ender.is_alive(), "end_pool hung on the half-written result"
+    assert time.monotonic() - started < 10 and all(p.exitcode is not None for p in pool.processes)
+
 # -- a signal at any moment: one line and its exit code within seconds, never a hang -----------------------------------
 
 TRIALS = {"train": [GOOD, {**GOOD, "name": "blue", "color": "blue"}],

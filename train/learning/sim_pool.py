@@ -57,6 +57,8 @@ from train.common.exits import signals_held
 _WORLD = None  # one World per worker process (or why it could not be built: WorldBuildError)
 START_METHOD = "fork" if sys.platform.startswith("linux") else "spawn"   # see the module docstring
 WATCH_S = 0.25   # how often a wait on a pool looks whether its processes are alive
+RESULTS_JOIN_S = 2.0   # how long an ending pool waits for its result thread: one that reads a result a killed
+                       # process half wrote waits for bytes that never come (a daemon thread: left, it holds no exit)
 PR_SET_PDEATHSIG = 1   # linux/prctl.h
 
 
@@ -194,7 +196,17 @@ class QuietPool(multiprocessing.pool.Pool):
         it waits for a job, for ever once that process was killed (a run ended by a signal while it ended its pool
         hung so after its one line)."""
         _kill_all(pool, inqueue, outqueue)
-        super()._terminate_pool(taskqueue, inqueue, outqueue, pool, *rest)
+        change_notifier, worker_handler, task_handler, result_handler, cache = rest
+        super()._terminate_pool(taskqueue, inqueue, outqueue, pool, change_notifier, worker_handler, task_handler,
+                                _BoundedJoin(result_handler), cache)
+
+    def join(self):
+        """Pool.join, the result thread waited for RESULTS_JOIN_S at most (see _BoundedJoin)."""
+        handler, self._result_handler = self._result_handler, _BoundedJoin(self._result_handler)
+        try:
+            super().join()
+        finally:
+            self._result_handler = handler
 
     def watch(self) -> None:
         """Raise WorkerDied if one of the pool's processes has died."""
@@ -208,6 +220,26 @@ class QuietPool(multiprocessing.pool.Pool):
 
     def apply_async(self, func, args=(), kwds={}, callback=None, error_callback=None):   # noqa: B006  Pool's own
         return _Watched(self, super().apply_async(func, args, kwds, callback, error_callback))
+
+
+class _BoundedJoin:
+    """A pool's result thread whose join waits RESULTS_JOIN_S at most. A process killed while it sent a result (a
+    signal to the runner's process group, or _kill_all) leaves part of it in the pipe: the thread then waits for the
+    rest, the sentinel Pool.terminate sends is read as part of it, and Pool's unbounded join hung the runner after
+    its one line (a SIGTERM 0.3 s into the goal trials, under load). The thread is a daemon: left waiting, it holds
+    neither the pool's end nor the interpreter's."""
+
+    def __init__(self, thread: threading.Thread):
+        object.__setattr__(self, "_thread", thread)
+
+    def __getattr__(self, name):
+        return getattr(self._thread, name)
+
+    def __setattr__(self, name, value):   # Pool sets the thread's _state: the thread reads it
+        setattr(self._thread, name, value)
+
+    def join(self, timeout=None):
+        self._thread.join(RESULTS_JOIN_S if timeout is None else min(timeout, RESULTS_JOIN_S))
 
 
 def _watched(pool: QuietPool, get):
