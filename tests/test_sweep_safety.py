@@ -373,7 +373,12 @@ def test_sighup_ends_a_sweep_as_ctrl_c(finished, tmp_path, local_ray, capsys):
     """SIGHUP (a closed terminal) after the first cell: exit code 129, one line, the cell on disk."""
     path = _write(tmp_path, TINY)
     out = tmp_path / "out"
-    code = sweep.main([str(path), "--out", str(out)], on_cell=lambda c: os.kill(os.getpid(), signal.SIGHUP))
+    # a SIGHUP ignored stays ignored (nohup: the sweep goes on, by design): the test's own, under nohup too, is not
+    previous = signal.signal(signal.SIGHUP, signal.SIG_DFL)
+    try:
+        code = sweep.main([str(path), "--out", str(out)], on_cell=lambda c: os.kill(os.getpid(), signal.SIGHUP))
+    finally:
+        signal.signal(signal.SIGHUP, previous)
     done = list((out / "cells").glob("*.parquet"))
     assert code == 129 and len(done) == 1
     assert [x for x in capsys.readouterr().err.splitlines() if not x.startswith("cells: ")] == [
