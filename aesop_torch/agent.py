@@ -365,10 +365,10 @@ class Agent(nn.Module):
         dimensions the few fates can be split along by chance: colour (3) and elongation (2) beside fill, size and
         weight, with 24 episodes. Probes' fate wrong after 24 objects: 128 of 640 over every live property, 76 over
         the dominant ones (tuning seeds 1000-1019 x 4 orders; median error 4.1 % and 3.6 %)."""
-        strength, floor = self.rules.strength, self.rules.retro_floor
-        live = (strength[:, FATE] > floor) & ~((strength[:, FLOATING] <= floor) & (strength[:, SINKING] <= floor))
+        gone = self.rules.eliminated
+        live = ~gone[:, FATE] & ~(gone[:, FLOATING] & gone[:, SINKING])
         if "causes" not in self.config.ablate:
-            dominant = (strength > 1.0).any(1) & live
+            dominant = self.rules.dominant.any(1) & live
             live = torch.where(dominant.any(-1, keepdim=True), dominant, live)
         columns = torch.zeros_like(x, dtype=torch.bool)
         for i, c in enumerate(cols):

@@ -193,7 +193,8 @@ def test_more_orders_than_full_records_run_as_a_population(paper_file, tmp_path)
     assert r.returncode == 0, r.stderr
     summary = json.loads((out / "summary.json").read_text())
     from train.learning.experiment import draw_orders
-    from train.runner.summary import FULL_RUNS, knowledge_key
+    from train.runner.settings import FULL_RUNS
+    from train.runner.summary import knowledge_key
     orders = draw_orders(3, "70", seed=0)
     names = [o["name"] for o in PAPER["train"]]
     # the first FULL_RUNS orders in full detail, every order in the compact block

@@ -367,12 +367,12 @@ def _draw_figure(exp, out, population):
     """Figure 2 (the exploration; a population's error bands over all its orders), drawn and written by the figure
     process: an object whose get() waits for its image."""
     from train.learning.experiment import senses_floor
+    from train.runner.figure_process import POPULATION_FIGURE_KEYS
 
     start_drawer()   # main() started it
     return _OPEN["drawer"].draw("train.runner.figures:save_figure2", exp.records, out / "figure2.png", 110,
                                 senses_floor(exp.probes),
-                                population and {k: population[k] for k in ("orders", "agree_fraction",
-                                                                           "most_common_knowledge", "curves")})
+                                population and {k: population[k] for k in POPULATION_FIGURE_KEYS})
 
 
 def _draw_population_figure(exp, out):

@@ -23,7 +23,6 @@ from pathlib import Path
 
 from aesop_torch.encoders import object_properties
 from aesop_torch.rules import KNOWLEDGE_LETTERS, STATES
-from train.runner.settings import FULL_RUNS  # noqa: F401  (its home: the runner's settings, torch-free)
 
 ROOT = Path(__file__).resolve().parents[2]
 GIT_TIMEOUT_S = 5.0
